@@ -1,0 +1,57 @@
+//! `bitt`: two-hand texture reconstruction from one image (BiTT, CVPR 2024).
+//!
+//! The binary is the only place that picks a burn device and touches the command line;
+//! everything else lives in the library crates (see ARCHITECTURE.md).
+
+mod backend_check;
+mod demo;
+mod device;
+mod pose_hands;
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+
+/// BiTT: bi-directional texture reconstruction of interacting two hands from a single image.
+#[derive(Debug, Parser)]
+#[command(name = "bitt", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Pose both hands of an annotation and write them (left then right, camera frame) as OBJ
+    /// (and optionally glTF binary); print each hand's projected 2D bounding box.
+    PoseHands(pose_hands::PoseHandsArgs),
+    /// Convert MANO_LEFT.pkl / MANO_RIGHT.pkl to safetensors, so later runs skip the pickle.
+    ConvertMano {
+        /// Folder holding MANO_LEFT.pkl and MANO_RIGHT.pkl exactly as distributed.
+        #[arg(long)]
+        model_dir: PathBuf,
+        /// Folder to write MANO_LEFT.safetensors and MANO_RIGHT.safetensors into.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Run the built-in demo scene (procedural hands; no licensed files needed).
+    Demo(demo::DemoArgs),
+    /// Run a small fixed computation (conv, matmul, autodiff) on one backend and print the
+    /// numbers, for comparing backends (`cargo xtask e2e`).
+    BackendCheck {
+        /// flex, ndarray, wgpu or cuda.
+        #[arg(long, default_value = "flex")]
+        device: device::DeviceName,
+    },
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::PoseHands(args) => pose_hands::run(&args),
+        Command::ConvertMano { model_dir, out } => pose_hands::convert_mano(&model_dir, &out),
+        Command::Demo(args) => demo::run(&args),
+        Command::BackendCheck { device } => backend_check::run(device),
+    }
+}

@@ -1,0 +1,254 @@
+//! `bitt pose-hands` and `bitt convert-mano`.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use bitt_mesh::annotation::{
+    BITT_CROP_SIZE, InterHandFrame, PosedTwoHands, scene_from_interhand_json,
+};
+use bitt_mesh::export::{ExportHand, write_glb, write_obj};
+use bitt_mesh::mano::{load_mano_pkl, save_safetensors};
+use bitt_mesh::{
+    HandPair, Side, TwoHandScene, load_bitt_annotation, load_model_dir, procedural_pair,
+};
+
+/// Arguments of `bitt pose-hands`.
+#[derive(Debug, clap::Args)]
+pub struct PoseHandsArgs {
+    /// Folder holding MANO_LEFT / MANO_RIGHT as `.pkl` (as distributed) or `.safetensors`.
+    #[arg(
+        long,
+        conflicts_with = "procedural",
+        required_unless_present = "procedural"
+    )]
+    pub model_dir: Option<PathBuf>,
+    /// Use the project's procedural hand model instead of MANO.
+    #[arg(long)]
+    pub procedural: bool,
+    /// A BiTT/InterHand annotation pickle (the demo `NN.pkl` layout).
+    #[arg(
+        long,
+        required_unless_present = "interhand_mano",
+        conflicts_with = "interhand_mano"
+    )]
+    pub annotation: Option<PathBuf>,
+    /// InterHand2.6M `*_MANO_NeuralAnnot.json` (with --interhand-cameras, --capture, --frame, --camera-name).
+    #[arg(long, requires_all = ["interhand_cameras", "capture", "frame", "camera_name"])]
+    pub interhand_mano: Option<PathBuf>,
+    /// InterHand2.6M `*_camera.json`.
+    #[arg(long)]
+    pub interhand_cameras: Option<PathBuf>,
+    /// InterHand2.6M capture id.
+    #[arg(long)]
+    pub capture: Option<String>,
+    /// InterHand2.6M frame index.
+    #[arg(long)]
+    pub frame: Option<String>,
+    /// InterHand2.6M camera name.
+    #[arg(long)]
+    pub camera_name: Option<String>,
+    /// Image size `WxH` that the intrinsics refer to. Default: the size of the image beside
+    /// the annotation (same name, .jpg/.png), else 256x256 (the BiTT crop).
+    #[arg(long, value_parser = parse_size)]
+    pub image_size: Option<(u32, u32)>,
+    /// OBJ file to write (both hands, left then right, camera frame).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Also write a glTF binary file.
+    #[arg(long)]
+    pub glb: Option<PathBuf>,
+    /// Print the bounding boxes as one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("`{s}` is not WxH"))?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .ok()
+            .filter(|&n| n > 0)
+            .ok_or_else(|| format!("`{s}` is not WxH"))
+    };
+    Ok((parse(w)?, parse(h)?))
+}
+
+/// The size of the image beside an annotation (`01.pkl` -> `01.jpg`), if one is there.
+fn sibling_image_size(annotation: &Path) -> Option<(u32, u32)> {
+    ["jpg", "jpeg", "png"]
+        .iter()
+        .map(|ext| annotation.with_extension(ext))
+        .find(|p| p.is_file())
+        .and_then(|p| image::image_dimensions(p).ok())
+}
+
+/// Loads the hand models the arguments ask for.
+pub fn models(model_dir: Option<&Path>, procedural: bool) -> Result<HandPair> {
+    match (model_dir, procedural) {
+        (Some(dir), false) => Ok(load_model_dir(dir)?),
+        (None, true) => Ok(procedural_pair()),
+        _ => bail!("give exactly one of --model-dir DIR and --procedural"),
+    }
+}
+
+fn scene(args: &PoseHandsArgs) -> Result<TwoHandScene> {
+    if let Some(path) = &args.annotation {
+        let size = args
+            .image_size
+            .or_else(|| sibling_image_size(path))
+            .unwrap_or((BITT_CROP_SIZE, BITT_CROP_SIZE));
+        return Ok(load_bitt_annotation(path, size)?);
+    }
+    let (Some(mano_path), Some(cam_path), Some(capture), Some(frame), Some(camera)) = (
+        &args.interhand_mano,
+        &args.interhand_cameras,
+        &args.capture,
+        &args.frame,
+        &args.camera_name,
+    ) else {
+        bail!(
+            "give --annotation FILE, or all of --interhand-mano, --interhand-cameras, --capture, --frame, --camera-name"
+        );
+    };
+    let read = |p: &Path| -> Result<serde_json::Value> {
+        let text =
+            std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+        serde_json::from_str(&text).with_context(|| format!("{} is not valid JSON", p.display()))
+    };
+    let Some(size) = args.image_size else {
+        bail!(
+            "--image-size WxH is required with InterHand2.6M JSON (the full frame's size, e.g. 334x512)"
+        );
+    };
+    let which = InterHandFrame {
+        capture: capture.clone(),
+        frame_idx: frame.clone(),
+        camera: camera.clone(),
+    };
+    Ok(scene_from_interhand_json(
+        &read(mano_path)?,
+        &read(cam_path)?,
+        &which,
+        size,
+        mano_path,
+        cam_path,
+    )?)
+}
+
+/// Writes the posed hands (left then right) as OBJ and optionally GLB.
+pub fn write_hands(
+    models: &HandPair,
+    posed: &PosedTwoHands,
+    obj: &Path,
+    glb: Option<&Path>,
+) -> Result<()> {
+    let names = ["left_hand", "right_hand"];
+    let hands: Vec<ExportHand> = Side::BOTH
+        .iter()
+        .zip(names)
+        .filter_map(|(&side, name)| {
+            let p = posed.get(side)?;
+            let m = models.get(side);
+            Some(ExportHand {
+                name,
+                vertices: &p.vertices,
+                faces: &m.faces,
+                uv: m.uv.as_ref(),
+                texture: None,
+            })
+        })
+        .collect();
+    write_obj(obj, &hands)?;
+    if let Some(glb) = glb {
+        write_glb(glb, &hands)?;
+    }
+    Ok(())
+}
+
+/// Prints each hand's projected bounding box (text or one JSON object).
+pub fn report_boxes(scene: &TwoHandScene, posed: &PosedTwoHands, json: bool) {
+    let mut boxes = serde_json::Map::new();
+    for side in Side::BOTH {
+        let Some(p) = posed.get(side) else {
+            if !json {
+                println!("{side} hand: not annotated");
+            }
+            continue;
+        };
+        match scene.pixel_box(&p.vertices) {
+            Some(b) if json => {
+                boxes.insert(
+                    side.to_string(),
+                    serde_json::json!([b.min.x, b.min.y, b.max.x, b.max.y]),
+                );
+            }
+            Some(b) => println!(
+                "{side} hand: 2D box x {:.1}..{:.1}, y {:.1}..{:.1} ({:.1} x {:.1} px in a {}x{} image)",
+                b.min.x,
+                b.max.x,
+                b.min.y,
+                b.max.y,
+                b.size().x,
+                b.size().y,
+                scene.camera.width,
+                scene.camera.height
+            ),
+            None if json => {
+                boxes.insert(side.to_string(), serde_json::Value::Null);
+            }
+            None => println!("{side} hand: behind the camera"),
+        }
+    }
+    if json {
+        println!("{}", serde_json::Value::Object(boxes));
+    }
+}
+
+/// `bitt pose-hands`.
+pub fn run(args: &PoseHandsArgs) -> Result<()> {
+    let models = models(args.model_dir.as_deref(), args.procedural)?;
+    let scene = scene(args)?;
+    let posed = scene.pose_in_camera(&models)?;
+    write_hands(&models, &posed, &args.out, args.glb.as_deref())?;
+    report_boxes(&scene, &posed, args.json);
+    if !args.json {
+        println!("wrote {}", args.out.display());
+        if let Some(g) = &args.glb {
+            println!("wrote {}", g.display());
+        }
+    }
+    Ok(())
+}
+
+/// `bitt convert-mano`: reads both pickles (checking them fully) and writes safetensors.
+pub fn convert_mano(model_dir: &Path, out: &Path) -> Result<()> {
+    let mut written = Vec::new();
+    let mut pair = Vec::new();
+    for (side, name) in [(Side::Left, "MANO_LEFT"), (Side::Right, "MANO_RIGHT")] {
+        let src = model_dir.join(format!("{name}.pkl"));
+        if !src.is_file() {
+            bail!(
+                "{} not found (expected MANO_LEFT.pkl and MANO_RIGHT.pkl as distributed)",
+                src.display()
+            );
+        }
+        pair.push((load_mano_pkl(&src, side)?, name));
+    }
+    let (right, _) = &pair[1];
+    let right = right.clone();
+    if bitt_mesh::mano::fix_left_shapedirs(&mut pair[0].0, &right) {
+        println!("left shapedirs: applied the well-known x-sign fix");
+    }
+    for (model, name) in &pair {
+        let dst = out.join(format!("{name}.safetensors"));
+        save_safetensors(model, &dst)?;
+        written.push(dst);
+    }
+    for w in written {
+        println!("wrote {}", w.display());
+    }
+    Ok(())
+}

@@ -1,0 +1,500 @@
+//! Two-hand annotations: the BiTT/InterHand demo pickles and InterHand2.6M's JSON files,
+//! both read into a [`TwoHandScene`] (per-hand MANO parameters + a pinhole camera).
+
+use std::path::Path;
+
+use bitt_pickle::Value;
+use glam::{DMat3, DVec3};
+
+use crate::MeshError;
+use crate::camera::{PinholeCamera, PixelBox};
+use crate::lbs::{HandParams, HandPose, PosedHand, rodrigues};
+use crate::mano::HandPair;
+use crate::model::{NUM_BETAS, NUM_POSE, Side};
+
+/// Side length of the square crops the BiTT reference cuts from InterHand2.6M frames
+/// (`IMG_SIZE` of its data preparation); the demo annotations' `K` is for this crop.
+pub const BITT_CROP_SIZE: u32 = 256;
+
+/// Where a frame came from, when the annotation says so (all optional).
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FrameInfo {
+    /// The InterHand2.6M image path.
+    pub file_name: Option<String>,
+    /// Capture id.
+    pub capture: Option<i64>,
+    /// Camera name (e.g. `"400262"`).
+    pub camera: Option<String>,
+    /// Frame index.
+    pub frame_idx: Option<i64>,
+}
+
+/// Two hands and the camera that saw them.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TwoHandScene {
+    /// Left-hand parameters, if the left hand is annotated.
+    pub left: Option<HandParams>,
+    /// Right-hand parameters, if the right hand is annotated.
+    pub right: Option<HandParams>,
+    /// The camera (world-to-camera extrinsics and intrinsics for the image).
+    pub camera: PinholeCamera,
+    /// Provenance.
+    pub frame: FrameInfo,
+}
+
+/// Both hands of a scene posed and moved into the camera frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PosedTwoHands {
+    /// The left hand in the camera frame.
+    pub left: Option<PosedHand>,
+    /// The right hand in the camera frame.
+    pub right: Option<PosedHand>,
+}
+
+impl PosedTwoHands {
+    /// The posed hand of one side.
+    pub fn get(&self, side: Side) -> Option<&PosedHand> {
+        match side {
+            Side::Left => self.left.as_ref(),
+            Side::Right => self.right.as_ref(),
+        }
+    }
+}
+
+impl TwoHandScene {
+    /// Parameters of one side.
+    pub fn hand(&self, side: Side) -> Option<&HandParams> {
+        match side {
+            Side::Left => self.left.as_ref(),
+            Side::Right => self.right.as_ref(),
+        }
+    }
+
+    /// Poses both hands with `models` and moves vertices and joints into the camera frame
+    /// (`v_cam = R v + t`, as the reference does).
+    pub fn pose_in_camera(&self, models: &HandPair) -> Result<PosedTwoHands, MeshError> {
+        self.camera.validate()?;
+        let pose = |side: Side| -> Result<Option<PosedHand>, MeshError> {
+            let Some(params) = self.hand(side) else {
+                return Ok(None);
+            };
+            let mut posed = models.get(side).forward(params).map_err(|e| match e {
+                MeshError::InvalidParams(d) => {
+                    MeshError::InvalidParams(format!("{side} hand: {d}"))
+                }
+                e => e,
+            })?;
+            for p in posed.vertices.iter_mut().chain(posed.joints.iter_mut()) {
+                *p = self.camera.world_to_camera(*p);
+            }
+            let to_cam =
+                glam::DMat4::from_mat3_translation(self.camera.rotation, self.camera.translation);
+            for t in &mut posed.joint_transforms {
+                *t = to_cam * *t;
+            }
+            Ok(Some(posed))
+        };
+        Ok(PosedTwoHands {
+            left: pose(Side::Left)?,
+            right: pose(Side::Right)?,
+        })
+    }
+
+    /// The pixel bounding box of a posed hand's vertices (camera-frame input), or `None` when
+    /// no vertex is in front of the camera.
+    pub fn pixel_box(&self, camera_frame_vertices: &[DVec3]) -> Option<PixelBox> {
+        PixelBox::around(
+            camera_frame_vertices
+                .iter()
+                .filter_map(|p| self.camera.camera_to_pixel(*p)),
+        )
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// BiTT / InterHand demo pickle.
+
+fn field<'a>(v: &'a Value, name: &str, ctx: &str, path: &Path) -> Result<&'a Value, MeshError> {
+    v.get(name)
+        .ok_or_else(|| MeshError::format(path, format!("missing `{ctx}{name}`")))
+}
+
+fn floats(v: &Value, n: usize, what: &str, path: &Path) -> Result<Vec<f64>, MeshError> {
+    let values = match v {
+        Value::Array(a) => a.to_f64(),
+        Value::List(items) | Value::Tuple(items) => items
+            .iter()
+            .map(|x| {
+                x.as_f64().ok_or_else(|| {
+                    MeshError::format(path, format!("`{what}` holds a {}", x.type_name()))
+                })
+            })
+            .collect::<Result<_, _>>()?,
+        other => {
+            return Err(MeshError::format(
+                path,
+                format!("`{what}` is a {}, expected numbers", other.type_name()),
+            ));
+        }
+    };
+    if values.len() != n {
+        return Err(MeshError::format(
+            path,
+            format!("`{what}` holds {} numbers, expected {n}", values.len()),
+        ));
+    }
+    if values.iter().any(|x| !x.is_finite()) {
+        return Err(MeshError::format(
+            path,
+            format!("`{what}` holds NaN or infinite values"),
+        ));
+    }
+    Ok(values)
+}
+
+/// Row-major 3x3 to matrix.
+fn mat3_rows(m: &[f64]) -> DMat3 {
+    DMat3::from_cols_array(&[m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7], m[8]]).transpose()
+}
+
+fn hand_from_bitt(v: &Value, side: Side, path: &Path) -> Result<Option<HandParams>, MeshError> {
+    if matches!(v, Value::None) {
+        return Ok(None);
+    }
+    let ctx = format!("mano_params.{side}.");
+    let get = |name: &str| field(v, name, &ctx, path);
+    let what = |name: &str| format!("{ctx}{name}");
+    let params = HandParams {
+        root_rotation: mat3_rows(&floats(get("R")?, 9, &what("R"), path)?),
+        pose: HandPose::Pca(floats(get("pose")?, NUM_POSE, &what("pose"), path)?),
+        betas: floats(get("shape")?, NUM_BETAS, &what("shape"), path)?,
+        trans: DVec3::from_slice(&floats(get("trans")?, 3, &what("trans"), path)?),
+    };
+    params
+        .validate()
+        .map_err(|e| MeshError::format(path, format!("{ctx}: {e}")))?;
+    Ok(Some(params))
+}
+
+/// Reads a BiTT/InterHand annotation pickle (the demo `NN.pkl` layout) already parsed into
+/// `root`. `image_size` is the size of the image `K` refers to ([`BITT_CROP_SIZE`] for the
+/// reference's crops).
+pub fn scene_from_bitt_annotation(
+    root: &Value,
+    path: &Path,
+    image_size: (u32, u32),
+) -> Result<TwoHandScene, MeshError> {
+    let mano = field(root, "mano_params", "", path)?;
+    let left = hand_from_bitt(field(mano, "left", "mano_params.", path)?, Side::Left, path)?;
+    let right = hand_from_bitt(
+        field(mano, "right", "mano_params.", path)?,
+        Side::Right,
+        path,
+    )?;
+    if left.is_none() && right.is_none() {
+        return Err(MeshError::format(
+            path,
+            "neither hand is annotated (both `mano_params` entries are None)",
+        ));
+    }
+    let cam = field(root, "camera", "", path)?;
+    let rotation = mat3_rows(&floats(
+        field(cam, "R", "camera.", path)?,
+        9,
+        "camera.R",
+        path,
+    )?);
+    let translation = DVec3::from_slice(&floats(
+        field(cam, "t", "camera.", path)?,
+        3,
+        "camera.t",
+        path,
+    )?);
+    let intrinsics = mat3_rows(&floats(
+        field(cam, "camera", "camera.", path)?,
+        9,
+        "camera.camera",
+        path,
+    )?);
+    let camera = PinholeCamera::new(
+        intrinsics,
+        rotation,
+        translation,
+        image_size.0,
+        image_size.1,
+    )
+    .map_err(|e| MeshError::format(path, e.to_string()))?;
+    let frame = match root.get("image") {
+        Some(img) => FrameInfo {
+            file_name: img
+                .get("file_name")
+                .and_then(Value::as_str)
+                .map(str::to_owned),
+            capture: img.get("capture").and_then(Value::as_i64),
+            camera: img.get("camera").and_then(|c| {
+                c.as_str()
+                    .map(str::to_owned)
+                    .or_else(|| c.as_i64().map(|i| i.to_string()))
+            }),
+            frame_idx: img.get("frame_idx").and_then(Value::as_i64),
+        },
+        None => FrameInfo::default(),
+    };
+    Ok(TwoHandScene {
+        left,
+        right,
+        camera,
+        frame,
+    })
+}
+
+/// Reads a BiTT/InterHand annotation pickle file.
+pub fn load_bitt_annotation(
+    path: &Path,
+    image_size: (u32, u32),
+) -> Result<TwoHandScene, MeshError> {
+    let root = bitt_pickle::from_path(path)?;
+    scene_from_bitt_annotation(&root, path, image_size)
+}
+
+// ---------------------------------------------------------------------------------------------
+// InterHand2.6M JSON.
+
+/// Which frame of an InterHand2.6M capture to read.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct InterHandFrame {
+    /// Capture id (a key of both JSON files).
+    pub capture: String,
+    /// Frame index (a key under the capture in the MANO JSON).
+    pub frame_idx: String,
+    /// Camera name (a key of `campos`, `camrot`, `focal`, `princpt`).
+    pub camera: String,
+}
+
+fn json_floats(
+    v: &serde_json::Value,
+    n: usize,
+    what: &str,
+    path: &Path,
+) -> Result<Vec<f64>, MeshError> {
+    let mut out = Vec::with_capacity(n);
+    // Flattens nested lists (camrot is a 3x3 list of lists) in order; JSON nesting is
+    // bounded by serde_json's own recursion limit.
+    fn walk(x: &serde_json::Value, out: &mut Vec<f64>) -> bool {
+        match x {
+            serde_json::Value::Number(n) => n.as_f64().map(|f| out.push(f)).is_some(),
+            serde_json::Value::Array(items) => items.iter().all(|i| walk(i, out)),
+            _ => false,
+        }
+    }
+    if !walk(v, &mut out) || out.len() != n || out.iter().any(|x| !x.is_finite()) {
+        return Err(MeshError::format(
+            path,
+            format!("`{what}` must hold {n} finite numbers"),
+        ));
+    }
+    Ok(out)
+}
+
+fn json_at<'a>(
+    v: &'a serde_json::Value,
+    keys: &[&str],
+    path: &Path,
+) -> Result<&'a serde_json::Value, MeshError> {
+    let mut cur = v;
+    for (i, k) in keys.iter().enumerate() {
+        cur = cur.get(k).ok_or_else(|| {
+            MeshError::format(path, format!("no entry `{}`", keys[..=i].join(".")))
+        })?;
+    }
+    Ok(cur)
+}
+
+/// Reads one frame of InterHand2.6M: `mano` is the parsed `*_MANO_NeuralAnnot.json`
+/// (`{capture: {frame: {"left"|"right": {pose[48], shape[10], trans[3]} | null}}}`), `cameras`
+/// the parsed `*_camera.json` (`{capture: {campos, camrot, focal, princpt: {camera: ...}}}`).
+///
+/// Converted as the reference does: root rotation from the first 3 pose values, the other 45
+/// are axis-angles relative to the mean pose, the camera translation is `-R campos / 1000`
+/// (millimetres to metres), and `K` comes from `focal` and `princpt` for the full image of
+/// `image_size`.
+pub fn scene_from_interhand_json(
+    mano: &serde_json::Value,
+    cameras: &serde_json::Value,
+    frame: &InterHandFrame,
+    image_size: (u32, u32),
+    mano_path: &Path,
+    camera_path: &Path,
+) -> Result<TwoHandScene, MeshError> {
+    let per_frame = json_at(mano, &[&frame.capture, &frame.frame_idx], mano_path)?;
+    let hand = |side: Side| -> Result<Option<HandParams>, MeshError> {
+        let v = match per_frame.get(side.as_str()) {
+            None | Some(serde_json::Value::Null) => return Ok(None),
+            Some(v) => v,
+        };
+        let what = |k: &str| format!("{}.{}.{side}.{k}", frame.capture, frame.frame_idx);
+        let pose = json_floats(
+            json_at(v, &["pose"], mano_path)?,
+            48,
+            &what("pose"),
+            mano_path,
+        )?;
+        let params = HandParams {
+            root_rotation: rodrigues(DVec3::new(pose[0], pose[1], pose[2])),
+            pose: HandPose::MeanRelativeAxisAngle(pose[3..].to_vec()),
+            betas: json_floats(
+                json_at(v, &["shape"], mano_path)?,
+                NUM_BETAS,
+                &what("shape"),
+                mano_path,
+            )?,
+            trans: DVec3::from_slice(&json_floats(
+                json_at(v, &["trans"], mano_path)?,
+                3,
+                &what("trans"),
+                mano_path,
+            )?),
+        };
+        Ok(Some(params))
+    };
+    let (left, right) = (hand(Side::Left)?, hand(Side::Right)?);
+    if left.is_none() && right.is_none() {
+        return Err(MeshError::format(
+            mano_path,
+            format!(
+                "frame {}.{} annotates neither hand",
+                frame.capture, frame.frame_idx
+            ),
+        ));
+    }
+    let cam = json_at(cameras, &[&frame.capture], camera_path)?;
+    let at = |k: &str, n: usize| {
+        let v = json_at(cam, &[k, &frame.camera], camera_path)?;
+        json_floats(
+            v,
+            n,
+            &format!("{}.{k}.{}", frame.capture, frame.camera),
+            camera_path,
+        )
+    };
+    let campos = DVec3::from_slice(&at("campos", 3)?);
+    let rotation = mat3_rows(&at("camrot", 9)?);
+    let focal = at("focal", 2)?;
+    let princpt = at("princpt", 2)?;
+    let translation = -(rotation * campos) / 1000.0;
+    let intrinsics = mat3_rows(&[
+        focal[0], 0.0, princpt[0], 0.0, focal[1], princpt[1], 0.0, 0.0, 1.0,
+    ]);
+    let camera = PinholeCamera::new(
+        intrinsics,
+        rotation,
+        translation,
+        image_size.0,
+        image_size.1,
+    )
+    .map_err(|e| MeshError::format(camera_path, e.to_string()))?;
+    Ok(TwoHandScene {
+        left,
+        right,
+        camera,
+        frame: FrameInfo {
+            file_name: None,
+            capture: frame.capture.parse().ok(),
+            camera: Some(frame.camera.clone()),
+            frame_idx: frame.frame_idx.parse().ok(),
+        },
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn mano_json() -> serde_json::Value {
+        let mut pose = vec![0.0; 48];
+        pose[0] = 0.5; // root about x
+        pose[5] = 0.1;
+        serde_json::json!({"7": {"1234": {
+            "right": {"pose": pose, "shape": vec![0.1; 10], "trans": [0.01, 0.02, 0.9]},
+            "left": null
+        }}})
+    }
+
+    fn camera_json() -> serde_json::Value {
+        serde_json::json!({"7": {
+            "campos": {"400262": [100.0, -50.0, 1000.0]},
+            "camrot": {"400262": [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]},
+            "focal": {"400262": [1200.0, 1210.0]},
+            "princpt": {"400262": [167.0, 256.0]}
+        }})
+    }
+
+    #[test]
+    fn interhand_json_is_converted_like_the_reference() {
+        let frame = InterHandFrame {
+            capture: "7".into(),
+            frame_idx: "1234".into(),
+            camera: "400262".into(),
+        };
+        let s = scene_from_interhand_json(
+            &mano_json(),
+            &camera_json(),
+            &frame,
+            (334, 512),
+            Path::new("m.json"),
+            Path::new("c.json"),
+        )
+        .unwrap();
+        assert!(s.left.is_none());
+        let r = s.right.unwrap();
+        assert!(
+            (r.root_rotation - DMat3::from_rotation_x(0.5))
+                .to_cols_array()
+                .iter()
+                .all(|x| x.abs() < 1e-12)
+        );
+        match &r.pose {
+            HandPose::MeanRelativeAxisAngle(p) => assert_eq!(p[2], 0.1),
+            p => panic!("unexpected pose {p:?}"),
+        }
+        assert!((s.camera.translation - DVec3::new(-0.1, 0.05, -1.0)).length() < 1e-12);
+        assert_eq!(s.camera.focal().y, 1210.0);
+        assert_eq!(s.frame.capture, Some(7));
+    }
+
+    #[test]
+    fn interhand_json_errors_name_the_missing_entry() {
+        let frame = InterHandFrame {
+            capture: "7".into(),
+            frame_idx: "99".into(),
+            camera: "400262".into(),
+        };
+        let e = scene_from_interhand_json(
+            &mano_json(),
+            &camera_json(),
+            &frame,
+            (334, 512),
+            Path::new("m.json"),
+            Path::new("c.json"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("m.json") && e.contains("7.99"), "{e}");
+        let frame = InterHandFrame {
+            capture: "7".into(),
+            frame_idx: "1234".into(),
+            camera: "nope".into(),
+        };
+        let e = scene_from_interhand_json(
+            &mano_json(),
+            &camera_json(),
+            &frame,
+            (334, 512),
+            Path::new("m.json"),
+            Path::new("c.json"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("c.json") && e.contains("nope"), "{e}");
+    }
+}

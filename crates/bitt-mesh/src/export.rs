@@ -1,0 +1,502 @@
+//! Writing posed hands: Wavefront OBJ (with UVs) and glTF 2.0 binary (`.glb`) with an
+//! optional texture image per hand, plus the atomic file write every writer uses.
+//!
+//! Coordinates are written as given (the callers pass camera-frame vertices, OpenCV axes:
+//! x right, y down, z forward). The glTF scene adds one root node that turns OpenCV axes
+//! into glTF's (y up, looking down -z), so viewers show the hands as the camera saw them.
+
+use std::io::Write;
+use std::path::Path;
+
+use glam::{DVec2, DVec3};
+use serde_json::json;
+
+use crate::MeshError;
+use crate::model::UvLayout;
+
+/// One hand to export.
+#[derive(Debug, Clone, Copy)]
+pub struct ExportHand<'a> {
+    /// Object / mesh name (e.g. `"left_hand"`).
+    pub name: &'a str,
+    /// Vertex positions.
+    pub vertices: &'a [DVec3],
+    /// Triangles (counter-clockwise seen from outside).
+    pub faces: &'a [[u32; 3]],
+    /// UV layout (v = 0 at the bottom of the texture), if any.
+    pub uv: Option<&'a UvLayout>,
+    /// Texture image for this hand (needs `uv`), if any.
+    pub texture: Option<&'a image::RgbImage>,
+}
+
+/// Writes `bytes` to `path` through a temporary file in the same folder and a rename, so a
+/// crash or a full disk never leaves a half-written file under the final name.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), MeshError> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => std::path::PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&dir).map_err(|e| MeshError::io(&dir, e))?;
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "out".into());
+    let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
+    let result = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(MeshError::io(path, e));
+    }
+    Ok(())
+}
+
+fn check_hand(h: &ExportHand) -> Result<(), MeshError> {
+    let err = |d: String| {
+        Err(MeshError::InvalidParams(format!(
+            "export of {}: {d}",
+            h.name
+        )))
+    };
+    let n = h.vertices.len();
+    if h.vertices.iter().any(|p| !p.is_finite()) {
+        return err("a vertex is NaN or infinite".into());
+    }
+    if let Some(f) = h.faces.iter().find(|f| f.iter().any(|&i| i as usize >= n)) {
+        return err(format!("face {f:?} indexes past {n} vertices"));
+    }
+    if let Some(uv) = h.uv {
+        if uv.faces.len() != h.faces.len() {
+            return err(format!(
+                "{} UV faces for {} faces",
+                uv.faces.len(),
+                h.faces.len()
+            ));
+        }
+        if uv
+            .faces
+            .iter()
+            .flatten()
+            .any(|&i| i as usize >= uv.uvs.len())
+        {
+            return err("a UV face indexes past the UV coordinates".into());
+        }
+    }
+    if h.texture.is_some() && h.uv.is_none() {
+        return err("a texture needs a UV layout".into());
+    }
+    Ok(())
+}
+
+/// The OBJ text of `hands` (one `o` object each, in the given order), with `vt` UVs where a
+/// hand has a layout. `mtllib` names a material library to reference (one material per
+/// hand, named after it), as written by [`mtl_text`].
+pub fn obj_text(hands: &[ExportHand], mtllib: Option<&str>) -> Result<String, MeshError> {
+    use std::fmt::Write as _;
+    let mut s = String::from("# written by bitt (two-hand texture reconstruction)\n");
+    if let Some(m) = mtllib {
+        let _ = writeln!(s, "mtllib {m}");
+    }
+    let (mut v_base, mut vt_base) = (1usize, 1usize);
+    for h in hands {
+        check_hand(h)?;
+        let _ = writeln!(s, "o {}", h.name);
+        for p in h.vertices {
+            let _ = writeln!(s, "v {:.7} {:.7} {:.7}", p.x, p.y, p.z);
+        }
+        if let Some(uv) = h.uv {
+            for t in &uv.uvs {
+                let _ = writeln!(s, "vt {:.7} {:.7}", t.x, t.y);
+            }
+        }
+        if mtllib.is_some() {
+            let _ = writeln!(s, "usemtl {}", h.name);
+        }
+        for (i, f) in h.faces.iter().enumerate() {
+            match h.uv {
+                Some(uv) => {
+                    let t = uv.faces[i];
+                    let _ = writeln!(
+                        s,
+                        "f {}/{} {}/{} {}/{}",
+                        f[0] as usize + v_base,
+                        t[0] as usize + vt_base,
+                        f[1] as usize + v_base,
+                        t[1] as usize + vt_base,
+                        f[2] as usize + v_base,
+                        t[2] as usize + vt_base
+                    );
+                }
+                None => {
+                    let _ = writeln!(
+                        s,
+                        "f {} {} {}",
+                        f[0] as usize + v_base,
+                        f[1] as usize + v_base,
+                        f[2] as usize + v_base
+                    );
+                }
+            }
+        }
+        v_base += h.vertices.len();
+        vt_base += h.uv.map_or(0, |u| u.uvs.len());
+    }
+    Ok(s)
+}
+
+/// A material library giving each hand (by name) its texture file, if it has one.
+pub fn mtl_text(materials: &[(&str, Option<&str>)]) -> String {
+    let mut s = String::new();
+    for (name, texture) in materials {
+        s.push_str(&format!(
+            "newmtl {name}\nKd 1.0 1.0 1.0\nKa 0 0 0\nKs 0 0 0\nillum 1\n"
+        ));
+        if let Some(t) = texture {
+            s.push_str(&format!("map_Kd {t}\n"));
+        }
+        s.push('\n');
+    }
+    s
+}
+
+/// Writes `hands` as one OBJ file (atomically). Hands with a texture get a `.mtl` beside the
+/// OBJ and their texture saved as `<obj stem>_<hand name>.png`.
+pub fn write_obj(path: &Path, hands: &[ExportHand]) -> Result<(), MeshError> {
+    let textured = hands.iter().any(|h| h.texture.is_some());
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "hands".into());
+    let dir = path.parent().unwrap_or(Path::new(""));
+    let mut mtllib = None;
+    if textured {
+        let mut materials = Vec::new();
+        let mut names = Vec::new();
+        for h in hands {
+            let file = h.texture.map(|_| format!("{stem}_{}.png", h.name));
+            if let (Some(file), Some(tex)) = (&file, h.texture) {
+                write_atomically(&dir.join(file), &png_bytes(tex)?)?;
+            }
+            names.push((h.name, file));
+        }
+        for (n, f) in &names {
+            materials.push((*n, f.as_deref()));
+        }
+        let mtl = format!("{stem}.mtl");
+        write_atomically(&dir.join(&mtl), mtl_text(&materials).as_bytes())?;
+        mtllib = Some(mtl);
+    }
+    let text = obj_text(hands, mtllib.as_deref())?;
+    write_atomically(path, text.as_bytes())
+}
+
+/// PNG encoding of an RGB image.
+pub fn png_bytes(img: &image::RgbImage) -> Result<Vec<u8>, MeshError> {
+    let mut out = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut out, image::ImageFormat::Png)
+        .map_err(|e| MeshError::InvalidParams(format!("cannot encode PNG: {e}")))?;
+    Ok(out.into_inner())
+}
+
+/// Per-vertex normals: area-weighted face normals, normalized (zero where undefined).
+pub fn vertex_normals(vertices: &[DVec3], faces: &[[u32; 3]]) -> Vec<DVec3> {
+    let mut n = vec![DVec3::ZERO; vertices.len()];
+    for f in faces {
+        let [a, b, c] = f.map(|i| vertices[i as usize]);
+        let fn_ = (b - a).cross(c - a);
+        for &i in f {
+            n[i as usize] += fn_;
+        }
+    }
+    n.into_iter().map(|v| v.normalize_or_zero()).collect()
+}
+
+/// Binary-chunk builder: appends 4-byte-aligned views.
+struct BinBuilder {
+    bin: Vec<u8>,
+    views: Vec<serde_json::Value>,
+    accessors: Vec<serde_json::Value>,
+}
+
+impl BinBuilder {
+    fn view(&mut self, bytes: &[u8], target: Option<u32>) -> usize {
+        while self.bin.len() % 4 != 0 {
+            self.bin.push(0);
+        }
+        let mut v = json!({"buffer": 0, "byteOffset": self.bin.len(), "byteLength": bytes.len()});
+        if let Some(t) = target {
+            v["target"] = json!(t);
+        }
+        self.bin.extend_from_slice(bytes);
+        self.views.push(v);
+        self.views.len() - 1
+    }
+
+    fn floats(&mut self, data: &[f32], width: usize, type_: &str, with_bounds: bool) -> usize {
+        let bytes: Vec<u8> = data.iter().flat_map(|x| x.to_le_bytes()).collect();
+        let view = self.view(&bytes, Some(34962));
+        let mut a = json!({"bufferView": view, "componentType": 5126, "count": data.len() / width, "type": type_});
+        if with_bounds {
+            let mut lo = vec![f32::INFINITY; width];
+            let mut hi = vec![f32::NEG_INFINITY; width];
+            for c in data.chunks_exact(width) {
+                for k in 0..width {
+                    lo[k] = lo[k].min(c[k]);
+                    hi[k] = hi[k].max(c[k]);
+                }
+            }
+            a["min"] = json!(lo);
+            a["max"] = json!(hi);
+        }
+        self.accessors.push(a);
+        self.accessors.len() - 1
+    }
+
+    fn indices(&mut self, data: &[u32]) -> usize {
+        let bytes: Vec<u8> = data.iter().flat_map(|x| x.to_le_bytes()).collect();
+        let view = self.view(&bytes, Some(34963));
+        self.accessors.push(json!({"bufferView": view, "componentType": 5125, "count": data.len(), "type": "SCALAR"}));
+        self.accessors.len() - 1
+    }
+}
+
+/// Splits a hand into glTF vertices: one per distinct (mesh vertex, UV vertex) corner pair,
+/// since glTF attributes are per vertex. Returns positions, normals, UVs (glTF convention,
+/// v = 0 at the top) and triangle indices.
+fn gltf_vertices(h: &ExportHand) -> (Vec<f32>, Vec<f32>, Option<Vec<f32>>, Vec<u32>) {
+    let normals = vertex_normals(h.vertices, h.faces);
+    let push3 = |out: &mut Vec<f32>, p: DVec3| out.extend([p.x as f32, p.y as f32, p.z as f32]);
+    match h.uv {
+        None => {
+            let mut pos = Vec::new();
+            let mut nor = Vec::new();
+            for (p, n) in h.vertices.iter().zip(&normals) {
+                push3(&mut pos, *p);
+                push3(&mut nor, *n);
+            }
+            (pos, nor, None, h.faces.iter().flatten().copied().collect())
+        }
+        Some(uv) => {
+            let mut map = std::collections::HashMap::new();
+            let (mut pos, mut nor, mut tex, mut idx) =
+                (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+            for (f, t) in h.faces.iter().zip(&uv.faces) {
+                for k in 0..3 {
+                    let key = (f[k], t[k]);
+                    let next = map.len() as u32;
+                    let i = *map.entry(key).or_insert_with(|| {
+                        push3(&mut pos, h.vertices[f[k] as usize]);
+                        push3(&mut nor, normals[f[k] as usize]);
+                        let q: DVec2 = uv.uvs[t[k] as usize];
+                        tex.extend([q.x as f32, 1.0 - q.y as f32]);
+                        next
+                    });
+                    idx.push(i);
+                }
+            }
+            (pos, nor, Some(tex), idx)
+        }
+    }
+}
+
+/// The glTF 2.0 binary (`.glb`) bytes of `hands`: one mesh and node per hand under a root
+/// node converting OpenCV camera axes to glTF axes; textured hands get a PBR material whose
+/// base colour is the embedded PNG.
+pub fn glb_bytes(hands: &[ExportHand]) -> Result<Vec<u8>, MeshError> {
+    let mut b = BinBuilder {
+        bin: Vec::new(),
+        views: Vec::new(),
+        accessors: Vec::new(),
+    };
+    let (mut meshes, mut nodes, mut materials, mut textures, mut images) =
+        (vec![], vec![], vec![], vec![], vec![]);
+    for h in hands {
+        check_hand(h)?;
+        let (pos, nor, tex, idx) = gltf_vertices(h);
+        let mut attributes = json!({
+            "POSITION": b.floats(&pos, 3, "VEC3", true),
+            "NORMAL": b.floats(&nor, 3, "VEC3", false),
+        });
+        if let Some(tex) = &tex {
+            attributes["TEXCOORD_0"] = json!(b.floats(tex, 2, "VEC2", false));
+        }
+        let mut primitive =
+            json!({"attributes": attributes, "indices": b.indices(&idx), "mode": 4});
+        let mut material = json!({
+            "name": h.name,
+            "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.62, 0.52, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.8},
+            "doubleSided": false
+        });
+        if let Some(img) = h.texture {
+            let view = b.view(&png_bytes(img)?, None);
+            images.push(json!({"bufferView": view, "mimeType": "image/png", "name": h.name}));
+            textures.push(json!({"source": images.len() - 1, "sampler": 0}));
+            material["pbrMetallicRoughness"]["baseColorFactor"] = json!([1.0, 1.0, 1.0, 1.0]);
+            material["pbrMetallicRoughness"]["baseColorTexture"] =
+                json!({"index": textures.len() - 1, "texCoord": 0});
+        }
+        materials.push(material);
+        primitive["material"] = json!(materials.len() - 1);
+        meshes.push(json!({"name": h.name, "primitives": [primitive]}));
+        nodes.push(json!({"name": h.name, "mesh": meshes.len() - 1}));
+    }
+    let children: Vec<usize> = (1..=nodes.len()).collect();
+    // Rotation of pi about x: (x, y, z) -> (x, -y, -z), OpenCV camera axes to glTF's.
+    let root = json!({"name": "opencv_camera_to_gltf", "rotation": [1.0, 0.0, 0.0, 0.0], "children": children});
+    let mut all_nodes = vec![root];
+    all_nodes.extend(nodes);
+    while b.bin.len() % 4 != 0 {
+        b.bin.push(0);
+    }
+    let mut doc = json!({
+        "asset": {"version": "2.0", "generator": concat!("bitt ", env!("CARGO_PKG_VERSION"))},
+        "scene": 0,
+        "scenes": [{"name": "hands", "nodes": [0]}],
+        "nodes": all_nodes,
+        "meshes": meshes,
+        "materials": materials,
+        "accessors": b.accessors,
+        "bufferViews": b.views,
+        "buffers": [{"byteLength": b.bin.len()}],
+    });
+    if !images.is_empty() {
+        doc["images"] = json!(images);
+        doc["textures"] = json!(textures);
+        doc["samplers"] =
+            json!([{"magFilter": 9729, "minFilter": 9729, "wrapS": 33071, "wrapT": 33071}]);
+    }
+    let mut json_bytes = serde_json::to_vec(&doc)
+        .map_err(|e| MeshError::InvalidParams(format!("glTF JSON: {e}")))?;
+    while json_bytes.len() % 4 != 0 {
+        json_bytes.push(b' ');
+    }
+    let total = 12 + 8 + json_bytes.len() + 8 + b.bin.len();
+    let total = u32::try_from(total)
+        .map_err(|_| MeshError::InvalidParams("glTF file would exceed 4 GiB".into()))?;
+    let mut out = Vec::with_capacity(total as usize);
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&total.to_le_bytes());
+    out.extend_from_slice(&(json_bytes.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&json_bytes);
+    out.extend_from_slice(&(b.bin.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"BIN\0");
+    out.extend_from_slice(&b.bin);
+    Ok(out)
+}
+
+/// Writes `hands` as a `.glb` file (atomically).
+pub fn write_glb(path: &Path, hands: &[ExportHand]) -> Result<(), MeshError> {
+    write_atomically(path, &glb_bytes(hands)?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn quad() -> (Vec<DVec3>, Vec<[u32; 3]>, UvLayout) {
+        let v = vec![DVec3::ZERO, DVec3::X, DVec3::new(1.0, 1.0, 0.0), DVec3::Y];
+        let f = vec![[0, 1, 2], [0, 2, 3]];
+        // A seam: the second triangle uses its own copy of corner 0.
+        let uv = UvLayout {
+            uvs: vec![
+                DVec2::ZERO,
+                DVec2::X,
+                DVec2::ONE,
+                DVec2::Y,
+                DVec2::new(0.0, 0.01),
+            ],
+            faces: vec![[0, 1, 2], [4, 2, 3]],
+        };
+        (v, f, uv)
+    }
+
+    #[test]
+    fn obj_has_both_objects_with_offset_indices() {
+        let (v, f, uv) = quad();
+        let a = ExportHand {
+            name: "left_hand",
+            vertices: &v,
+            faces: &f,
+            uv: Some(&uv),
+            texture: None,
+        };
+        let b = ExportHand {
+            name: "right_hand",
+            vertices: &v,
+            faces: &f,
+            uv: None,
+            texture: None,
+        };
+        let s = obj_text(&[a, b], None).unwrap();
+        assert!(s.contains("o left_hand\n") && s.contains("o right_hand\n"));
+        assert_eq!(s.lines().filter(|l| l.starts_with("v ")).count(), 8);
+        assert_eq!(s.lines().filter(|l| l.starts_with("vt ")).count(), 5);
+        assert!(s.contains("f 1/5 3/3 4/4\n"), "{s}");
+        assert!(s.contains("f 5 6 7\n"), "{s}");
+    }
+
+    #[test]
+    fn glb_is_valid_gltf_with_split_seam_vertices() {
+        let (v, f, uv) = quad();
+        let tex = image::RgbImage::from_pixel(4, 4, image::Rgb([200, 150, 120]));
+        let a = ExportHand {
+            name: "left_hand",
+            vertices: &v,
+            faces: &f,
+            uv: Some(&uv),
+            texture: Some(&tex),
+        };
+        let bytes = glb_bytes(&[a]).unwrap();
+        let g = gltf::Gltf::from_slice(&bytes).expect("valid glTF");
+        let mesh = g.meshes().next().unwrap();
+        let prim = mesh.primitives().next().unwrap();
+        assert_eq!(
+            prim.get(&gltf::Semantic::Positions).unwrap().count(),
+            5,
+            "seam splits one vertex"
+        );
+        assert_eq!(prim.indices().unwrap().count(), 6);
+        assert!(
+            prim.material()
+                .pbr_metallic_roughness()
+                .base_color_texture()
+                .is_some()
+        );
+        assert_eq!(g.images().count(), 1);
+    }
+
+    #[test]
+    fn bad_faces_are_rejected_before_writing() {
+        let (v, _, _) = quad();
+        let f = vec![[0, 1, 9]];
+        let h = ExportHand {
+            name: "h",
+            vertices: &v,
+            faces: &f,
+            uv: None,
+            texture: None,
+        };
+        let dir = std::env::temp_dir().join(format!("bitt-export-{}", std::process::id()));
+        let path = dir.join("bad.obj");
+        assert!(write_obj(&path, &[h]).is_err());
+        assert!(!path.exists(), "nothing half-written");
+    }
+
+    #[test]
+    fn atomic_write_replaces_whole_file() {
+        let dir = std::env::temp_dir().join(format!("bitt-atomic-{}", std::process::id()));
+        let path = dir.join("x.txt");
+        write_atomically(&path, b"first").unwrap();
+        write_atomically(&path, b"second").unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), b"second");
+        let leftovers = std::fs::read_dir(&dir).unwrap().count();
+        assert_eq!(leftovers, 1);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

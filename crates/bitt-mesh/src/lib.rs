@@ -1,0 +1,37 @@
+//! Hand geometry for BiTT.
+//!
+//! - [`model`]: the [`HandModel`] struct shared by MANO and the procedural hand.
+//! - [`lbs`]: the forward pass (shape and pose blend shapes, linear blend skinning).
+//! - [`mano`]: loading the user's MANO `.pkl` files and their safetensors conversions.
+//! - [`procedural`]: the license-free hand model this project generates itself.
+//! - [`camera`]: pinhole and orthographic cameras.
+//! - [`annotation`]: BiTT/InterHand annotation pickles and InterHand2.6M JSON.
+//! - [`export`]: OBJ and glTF 2.0 binary writers.
+//!
+//! This crate knows nothing of tensors, networks or textures beyond a UV layout, and never
+//! decides where files live: it reads and writes only the paths it is handed.
+
+pub mod annotation;
+pub mod camera;
+pub mod error;
+pub mod export;
+pub mod lbs;
+pub mod mano;
+pub mod model;
+pub mod procedural;
+
+pub use annotation::{TwoHandScene, load_bitt_annotation};
+pub use camera::{OrthographicCamera, PinholeCamera};
+pub use error::MeshError;
+pub use lbs::{HandParams, HandPose, PosedHand};
+pub use mano::{HandPair, load_model_dir};
+pub use model::{HandModel, Side, UvLayout};
+pub use procedural::{ProceduralHandConfig, default_hand, procedural_hand};
+
+/// The procedural left and right hands with default settings.
+pub fn procedural_pair() -> HandPair {
+    HandPair {
+        left: default_hand(Side::Left),
+        right: default_hand(Side::Right),
+    }
+}

@@ -1,0 +1,227 @@
+//! Project automation, run as `cargo xtask <command>` (alias in `.cargo/config.toml`).
+//!
+//! Heavy work always runs the `bitt` binary in release mode: nobody waits on a debug build
+//! of a numeric loop. Commands:
+//!
+//! - `demo [ARGS]`: the built-in demo scene (`bitt demo`).
+//! - `test`: the whole test suite (release build) and then `e2e`.
+//! - `e2e`: the same computation on every backend (flex, ndarray, wgpu), compared.
+//! - `pose-hands ARGS`, `convert-mano ARGS`: forwarded to `bitt`.
+//! - `fuzz [--seconds N]`: fuzz the pickle reader with cargo-fuzz.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, ExitStatus};
+
+use anyhow::{Context, Result, bail};
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("."))
+}
+
+fn cargo() -> Command {
+    let mut c = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
+    c.current_dir(root());
+    c
+}
+
+fn check(status: ExitStatus, what: &str) -> Result<()> {
+    if !status.success() {
+        bail!("{what} failed ({status})");
+    }
+    Ok(())
+}
+
+/// Builds the workspace in release mode and returns the `bitt` binary's path.
+///
+/// Always the whole workspace with all targets: that is the feature set `cargo test
+/// --workspace --release` resolves too, so tests, `e2e` and the CLI share one build of burn
+/// (building `-p bitt-cli` alone would unify features differently and rebuild it).
+fn build_bitt() -> Result<PathBuf> {
+    let status = cargo()
+        .args([
+            "build",
+            "--quiet",
+            "--release",
+            "--workspace",
+            "--all-targets",
+        ])
+        .status()?;
+    check(status, "building bitt")?;
+    let target = std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root().join("target"));
+    let target = if target.is_relative() {
+        root().join(target)
+    } else {
+        target
+    };
+    Ok(target
+        .join("release")
+        .join(format!("bitt{}", std::env::consts::EXE_SUFFIX)))
+}
+
+/// Runs the release `bitt` with `args`, inheriting stdio.
+fn bitt(args: &[String]) -> Result<()> {
+    let bin = build_bitt()?;
+    let status = Command::new(bin)
+        .args(args)
+        .status()
+        .context("running bitt")?;
+    check(status, "bitt")
+}
+
+fn close(a: f64, b: f64) -> bool {
+    (a - b).abs() <= 1e-4 + 2e-3 * a.abs().max(b.abs())
+}
+
+/// Compares two backend-check outputs; returns the fields that disagree.
+fn compare(reference: &serde_json::Value, other: &serde_json::Value) -> Vec<String> {
+    let mut bad = Vec::new();
+    for field in ["loss", "output", "grad_weight", "grad_bias"] {
+        let flat = |v: &serde_json::Value| -> Vec<f64> {
+            match &v[field] {
+                serde_json::Value::Array(a) => a.iter().filter_map(|x| x.as_f64()).collect(),
+                x => x.as_f64().into_iter().collect(),
+            }
+        };
+        let (a, b) = (flat(reference), flat(other));
+        if a.is_empty() || a.len() != b.len() {
+            bad.push(format!("{field}: {} vs {} values", a.len(), b.len()));
+            continue;
+        }
+        if let Some((i, (x, y))) = a
+            .iter()
+            .zip(&b)
+            .enumerate()
+            .find(|(_, (x, y))| !close(**x, **y))
+        {
+            bad.push(format!("{field}[{i}]: {x} vs {y}"));
+        }
+    }
+    bad
+}
+
+fn e2e() -> Result<()> {
+    let bin = build_bitt()?;
+    let mut results = Vec::new();
+    for device in ["flex", "ndarray", "wgpu"] {
+        let out = Command::new(&bin)
+            .args(["backend-check", "--device", device])
+            .output()?;
+        if !out.status.success() {
+            bail!(
+                "backend check on {device} failed ({}):\n{}",
+                out.status,
+                String::from_utf8_lossy(&out.stderr)
+                    .lines()
+                    .rev()
+                    .take(15)
+                    .collect::<Vec<_>>()
+                    .into_iter()
+                    .rev()
+                    .collect::<Vec<_>>()
+                    .join("\n")
+            );
+        }
+        let line = String::from_utf8_lossy(&out.stdout);
+        let v: serde_json::Value = serde_json::from_str(line.trim())
+            .with_context(|| format!("{device} printed {line}"))?;
+        println!(
+            "e2e {device:8} loss {:.6}  ({:.2} s)",
+            v["loss"].as_f64().unwrap_or(f64::NAN),
+            v["seconds"].as_f64().unwrap_or(f64::NAN)
+        );
+        results.push((device, v));
+    }
+    let (ref_name, reference) = &results[0];
+    let mut failed = false;
+    for (name, v) in &results[1..] {
+        let bad = compare(reference, v);
+        if bad.is_empty() {
+            println!("e2e {name} matches {ref_name}");
+        } else {
+            failed = true;
+            println!("e2e {name} differs from {ref_name}: {}", bad.join("; "));
+        }
+    }
+    // The demo command end to end, into a scratch folder.
+    let scratch = std::env::temp_dir().join(format!("bitt-e2e-demo-{}", std::process::id()));
+    let status = Command::new(&bin)
+        .args(["demo", "--out"])
+        .arg(&scratch)
+        .stdout(std::process::Stdio::null())
+        .status()?;
+    check(status, "bitt demo")?;
+    for f in ["hands.obj", "hands.glb", "scene.json"] {
+        let len = std::fs::metadata(scratch.join(f))
+            .map(|m| m.len())
+            .unwrap_or(0);
+        if len == 0 {
+            bail!("bitt demo did not write {f}");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&scratch);
+    println!("e2e demo wrote hands.obj, hands.glb, scene.json");
+    if failed {
+        bail!("backends disagree");
+    }
+    println!("e2e: 3 passed, 0 failed");
+    Ok(())
+}
+
+fn fuzz(args: &[String]) -> Result<()> {
+    let seconds = match args {
+        [] => 60,
+        [flag, n] if flag == "--seconds" => n.parse().context("--seconds takes a number")?,
+        _ => bail!("usage: cargo xtask fuzz [--seconds N]"),
+    };
+    let have = Command::new("cargo")
+        .args(["fuzz", "--version"])
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false);
+    if !have {
+        bail!("cargo-fuzz is not installed: `cargo install cargo-fuzz`");
+    }
+    let dir = root().join("crates/bitt-pickle/fuzz");
+    let status = Command::new("cargo")
+        .current_dir(&dir)
+        // cargo-fuzz needs nightly flags; the stable toolchain accepts them with this switch.
+        .env("RUSTC_BOOTSTRAP", "1")
+        .args([
+            "fuzz",
+            "run",
+            "from_bytes",
+            "corpus/from_bytes",
+            "--",
+            &format!("-max_total_time={seconds}"),
+        ])
+        .status()?;
+    check(status, "cargo fuzz")
+}
+
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let Some((cmd, rest)) = args.split_first() else {
+        bail!("usage: cargo xtask <demo|test|e2e|pose-hands|convert-mano|fuzz> [ARGS]");
+    };
+    match cmd.as_str() {
+        "demo" => bitt(&[&["demo".to_string()], rest].concat()),
+        "pose-hands" | "convert-mano" => bitt(&args),
+        "test" => {
+            let status = cargo()
+                .args(["test", "--workspace", "--release"])
+                .status()?;
+            check(status, "cargo test")?;
+            e2e()
+        }
+        "e2e" => e2e(),
+        "fuzz" => fuzz(rest),
+        other => {
+            bail!("unknown command `{other}`; try demo, test, e2e, pose-hands, convert-mano, fuzz")
+        }
+    }
+}
