@@ -437,7 +437,7 @@ fn left_shapedirs_fix_conversion_and_model_dir_loading() {
     let pair = load_model_dir(&dir).unwrap();
     let mut fixed = shapedirs10(&left);
     for (i, x) in fixed.iter_mut().enumerate() {
-        if (i / 10) % 3 == 0 {
+        if (i / 10).is_multiple_of(3) {
             *x = -*x;
         }
     }

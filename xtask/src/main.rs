@@ -104,12 +104,25 @@ fn compare(reference: &serde_json::Value, other: &serde_json::Value) -> Vec<Stri
     bad
 }
 
+/// Mesa's Vulkan loader wants `XDG_RUNTIME_DIR`; CI shells often lack it.
+fn runtime_dir() -> PathBuf {
+    match std::env::var_os("XDG_RUNTIME_DIR") {
+        Some(d) if Path::new(&d).is_dir() => PathBuf::from(d),
+        _ => {
+            let d = std::env::temp_dir().join("bitt-xdg-runtime");
+            let _ = std::fs::create_dir_all(&d);
+            d
+        }
+    }
+}
+
 fn e2e() -> Result<()> {
     let bin = build_bitt()?;
     let mut results = Vec::new();
     for device in ["flex", "ndarray", "wgpu"] {
         let out = Command::new(&bin)
             .args(["backend-check", "--device", device])
+            .env("XDG_RUNTIME_DIR", runtime_dir())
             .output()?;
         if !out.status.success() {
             bail!(
@@ -187,18 +200,19 @@ fn fuzz(args: &[String]) -> Result<()> {
         bail!("cargo-fuzz is not installed: `cargo install cargo-fuzz`");
     }
     let dir = root().join("crates/bitt-pickle/fuzz");
+    // New inputs go to a scratch corpus (ignored by git); the committed seeds stay small.
+    let work = dir.join("target/corpus-work");
+    std::fs::create_dir_all(&work)?;
     let status = Command::new("cargo")
         .current_dir(&dir)
         // cargo-fuzz needs nightly flags; the stable toolchain accepts them with this switch.
         .env("RUSTC_BOOTSTRAP", "1")
-        .args([
-            "fuzz",
-            "run",
-            "from_bytes",
-            "corpus/from_bytes",
-            "--",
-            &format!("-max_total_time={seconds}"),
-        ])
+        .args(["fuzz", "run", "from_bytes"])
+        .arg(&work)
+        .arg("corpus/from_bytes")
+        .arg("--")
+        .arg(format!("-max_total_time={seconds}"))
+        .arg("-print_final_stats=1")
         .status()?;
     check(status, "cargo fuzz")
 }

@@ -19,18 +19,25 @@ fn pattern(n: usize, scale: f32, freq: f32, phase: f32) -> Vec<f32> {
         .collect()
 }
 
-/// Result of the check.
+/// The numbers the check computes.
 #[derive(Debug, serde::Serialize)]
-struct CheckOutput {
-    device: DeviceName,
+struct Numbers {
     loss: f32,
     output: Vec<f32>,
     grad_weight: Vec<f32>,
     grad_bias: Vec<f32>,
+}
+
+/// Result of the check, printed as one JSON line.
+#[derive(Debug, serde::Serialize)]
+struct CheckOutput {
+    device: DeviceName,
+    #[serde(flatten)]
+    numbers: Numbers,
     seconds: f64,
 }
 
-fn compute(device: &Device) -> Result<(f32, Vec<f32>, Vec<f32>, Vec<f32>)> {
+fn compute(device: &Device) -> Result<Numbers> {
     let ad = device.clone().autodiff();
     let x = Tensor::<4>::from_data(
         TensorData::new(pattern(2 * 3 * 12 * 12, 0.5, 0.37, 0.1), [2, 3, 12, 12]),
@@ -67,25 +74,22 @@ fn compute(device: &Device) -> Result<(f32, Vec<f32>, Vec<f32>, Vec<f32>)> {
     let loss_v = vec(loss.clone().without_autodiff())?[0];
     let gw = w.grad(&grads).context("no gradient for the conv weight")?;
     let gb = b.grad(&grads).context("no gradient for the conv bias")?;
-    Ok((
-        loss_v,
-        vec(z.without_autodiff().reshape([10]))?,
-        vec(gw.reshape([108]))?,
-        vec(gb)?,
-    ))
+    Ok(Numbers {
+        loss: loss_v,
+        output: vec(z.without_autodiff().reshape([10]))?,
+        grad_weight: vec(gw.reshape([108]))?,
+        grad_bias: vec(gb)?,
+    })
 }
 
 /// Runs the check on `name` and prints one JSON line.
 pub fn run(name: DeviceName) -> Result<()> {
     let device = name.device()?;
     let start = Instant::now();
-    let (loss, output, grad_weight, grad_bias) = compute(&device)?;
+    let numbers = compute(&device)?;
     let out = CheckOutput {
         device: name,
-        loss,
-        output,
-        grad_weight,
-        grad_bias,
+        numbers,
         seconds: start.elapsed().as_secs_f64(),
     };
     println!("{}", serde_json::to_string(&out)?);

@@ -429,22 +429,20 @@ mod tests {
         }})
     }
 
+    /// Reads frame `capture.frame_idx` seen by `camera` from the test JSON.
+    fn read(capture: &str, frame_idx: &str, camera: &str) -> Result<TwoHandScene, MeshError> {
+        let frame = InterHandFrame {
+            capture: capture.into(),
+            frame_idx: frame_idx.into(),
+            camera: camera.into(),
+        };
+        let (m, c) = (Path::new("m.json"), Path::new("c.json"));
+        scene_from_interhand_json(&mano_json(), &camera_json(), &frame, (334, 512), m, c)
+    }
+
     #[test]
     fn interhand_json_is_converted_like_the_reference() {
-        let frame = InterHandFrame {
-            capture: "7".into(),
-            frame_idx: "1234".into(),
-            camera: "400262".into(),
-        };
-        let s = scene_from_interhand_json(
-            &mano_json(),
-            &camera_json(),
-            &frame,
-            (334, 512),
-            Path::new("m.json"),
-            Path::new("c.json"),
-        )
-        .unwrap();
+        let s = read("7", "1234", "400262").unwrap();
         assert!(s.left.is_none());
         let r = s.right.unwrap();
         assert!(
@@ -464,37 +462,9 @@ mod tests {
 
     #[test]
     fn interhand_json_errors_name_the_missing_entry() {
-        let frame = InterHandFrame {
-            capture: "7".into(),
-            frame_idx: "99".into(),
-            camera: "400262".into(),
-        };
-        let e = scene_from_interhand_json(
-            &mano_json(),
-            &camera_json(),
-            &frame,
-            (334, 512),
-            Path::new("m.json"),
-            Path::new("c.json"),
-        )
-        .unwrap_err()
-        .to_string();
+        let e = read("7", "99", "400262").unwrap_err().to_string();
         assert!(e.contains("m.json") && e.contains("7.99"), "{e}");
-        let frame = InterHandFrame {
-            capture: "7".into(),
-            frame_idx: "1234".into(),
-            camera: "nope".into(),
-        };
-        let e = scene_from_interhand_json(
-            &mano_json(),
-            &camera_json(),
-            &frame,
-            (334, 512),
-            Path::new("m.json"),
-            Path::new("c.json"),
-        )
-        .unwrap_err()
-        .to_string();
+        let e = read("7", "1234", "nope").unwrap_err().to_string();
         assert!(e.contains("c.json") && e.contains("nope"), "{e}");
     }
 }

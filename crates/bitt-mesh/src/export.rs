@@ -215,6 +215,11 @@ pub fn vertex_normals(vertices: &[DVec3], faces: &[[u32; 3]]) -> Vec<DVec3> {
     n.into_iter().map(|v| v.normalize_or_zero()).collect()
 }
 
+/// Pads `buf` with `byte` to a multiple of 4 bytes (glTF chunk and view alignment).
+fn pad_to_4(buf: &mut Vec<u8>, byte: u8) {
+    buf.resize(buf.len().next_multiple_of(4), byte);
+}
+
 /// Binary-chunk builder: appends 4-byte-aligned views.
 struct BinBuilder {
     bin: Vec<u8>,
@@ -224,9 +229,7 @@ struct BinBuilder {
 
 impl BinBuilder {
     fn view(&mut self, bytes: &[u8], target: Option<u32>) -> usize {
-        while self.bin.len() % 4 != 0 {
-            self.bin.push(0);
-        }
+        pad_to_4(&mut self.bin, 0);
         let mut v = json!({"buffer": 0, "byteOffset": self.bin.len(), "byteLength": bytes.len()});
         if let Some(t) = target {
             v["target"] = json!(t);
@@ -349,9 +352,7 @@ pub fn glb_bytes(hands: &[ExportHand]) -> Result<Vec<u8>, MeshError> {
     let root = json!({"name": "opencv_camera_to_gltf", "rotation": [1.0, 0.0, 0.0, 0.0], "children": children});
     let mut all_nodes = vec![root];
     all_nodes.extend(nodes);
-    while b.bin.len() % 4 != 0 {
-        b.bin.push(0);
-    }
+    pad_to_4(&mut b.bin, 0);
     let mut doc = json!({
         "asset": {"version": "2.0", "generator": concat!("bitt ", env!("CARGO_PKG_VERSION"))},
         "scene": 0,
@@ -371,9 +372,7 @@ pub fn glb_bytes(hands: &[ExportHand]) -> Result<Vec<u8>, MeshError> {
     }
     let mut json_bytes = serde_json::to_vec(&doc)
         .map_err(|e| MeshError::InvalidParams(format!("glTF JSON: {e}")))?;
-    while json_bytes.len() % 4 != 0 {
-        json_bytes.push(b' ');
-    }
+    pad_to_4(&mut json_bytes, b' ');
     let total = 12 + 8 + json_bytes.len() + 8 + b.bin.len();
     let total = u32::try_from(total)
         .map_err(|_| MeshError::InvalidParams("glTF file would exceed 4 GiB".into()))?;

@@ -208,7 +208,7 @@ impl HandModel {
         for j in 1..NUM_JOINTS {
             let m = rotations[j].transpose().to_cols_array(); // row-major of R_j
             for (k, value) in m.iter().enumerate() {
-                let identity = if k % 4 == 0 { 1.0 } else { 0.0 };
+                let identity = if k.is_multiple_of(4) { 1.0 } else { 0.0 };
                 features[(j - 1) * 9 + k] = value - identity;
             }
         }

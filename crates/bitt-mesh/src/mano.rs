@@ -607,7 +607,7 @@ mod tests {
         );
         // Any non-zero x direction flips sign; y and z rows are untouched.
         let i = (0..left.shape_dirs.len())
-            .find(|&i| (i / NUM_BETAS) % 3 == 0 && right.shape_dirs[i] != 0.0)
+            .find(|&i| (i / NUM_BETAS).is_multiple_of(3) && right.shape_dirs[i] != 0.0)
             .unwrap();
         assert_eq!(left.shape_dirs[i], -right.shape_dirs[i]);
         let j = (0..left.shape_dirs.len())

@@ -128,7 +128,7 @@ fn fist_pose() -> Vec<f64> {
 fn mirror_pose(pose: &[f64]) -> Vec<f64> {
     pose.iter()
         .enumerate()
-        .map(|(i, x)| if i % 3 == 0 { *x } else { -x })
+        .map(|(i, x)| if i.is_multiple_of(3) { *x } else { -x })
         .collect()
 }
 
