@@ -230,6 +230,13 @@ fn main() -> Result<()> {
                 .args(["test", "--workspace", "--release"])
                 .status()?;
             check(status, "cargo test")?;
+            let demo = root().join("../shared/data/interhand_demo/01.pkl");
+            if !demo.is_file() {
+                println!(
+                    "note: {} is absent: the InterHand demo-frame tests were SKIPPED",
+                    demo.display()
+                );
+            }
             e2e()
         }
         "e2e" => e2e(),
