@@ -6,7 +6,7 @@
 //! - `demo [ARGS]`: the built-in demo scene (`bitt demo`).
 //! - `test`: the whole test suite (release build) and then `e2e`.
 //! - `e2e`: the same computation on every backend (flex, ndarray, wgpu), compared.
-//! - `pose-hands ARGS`, `convert-mano ARGS`: forwarded to `bitt`.
+//! - `pose-hands`, `convert-mano`, `texture`, `convert-html` ARGS: forwarded to `bitt`.
 //! - `fuzz [--seconds N]`: fuzz the pickle reader with cargo-fuzz.
 
 use std::path::{Path, PathBuf};
@@ -80,7 +80,14 @@ fn close(a: f64, b: f64) -> bool {
 /// Compares two backend-check outputs; returns the fields that disagree.
 fn compare(reference: &serde_json::Value, other: &serde_json::Value) -> Vec<String> {
     let mut bad = Vec::new();
-    for field in ["loss", "output", "grad_weight", "grad_bias"] {
+    for field in [
+        "loss",
+        "output",
+        "grad_weight",
+        "grad_bias",
+        "texture_image_sums",
+        "grad_texture_params",
+    ] {
         let flat = |v: &serde_json::Value| -> Vec<f64> {
             match &v[field] {
                 serde_json::Value::Array(a) => a.iter().filter_map(|x| x.as_f64()).collect(),
@@ -176,12 +183,40 @@ fn e2e() -> Result<()> {
             bail!("bitt demo did not write {f}");
         }
     }
-    let _ = std::fs::remove_dir_all(&scratch);
     println!("e2e demo wrote hands.obj, hands.glb, scene.json");
+    // The procedural texture model end to end: fit, save, reload, write a texture.
+    let model = scratch.join("skin.safetensors");
+    let tex = scratch.join("skin.png");
+    let status = Command::new(&bin)
+        .args([
+            "texture",
+            "--procedural",
+            "--resolution",
+            "128",
+            "--random",
+            "1",
+        ])
+        .arg("--save-model")
+        .arg(&model)
+        .arg("--out")
+        .arg(&tex)
+        .stdout(std::process::Stdio::null())
+        .status()?;
+    check(status, "bitt texture --procedural")?;
+    let status = Command::new(&bin)
+        .args(["texture", "--random", "2", "--model"])
+        .arg(&model)
+        .arg("--out")
+        .arg(&tex)
+        .stdout(std::process::Stdio::null())
+        .status()?;
+    check(status, "bitt texture --model")?;
+    println!("e2e texture fitted, saved, reloaded and wrote a 128x128 UV texture");
+    let _ = std::fs::remove_dir_all(&scratch);
     if failed {
         bail!("backends disagree");
     }
-    println!("e2e: 3 passed, 0 failed");
+    println!("e2e: 4 passed, 0 failed");
     Ok(())
 }
 
@@ -220,11 +255,13 @@ fn fuzz(args: &[String]) -> Result<()> {
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some((cmd, rest)) = args.split_first() else {
-        bail!("usage: cargo xtask <demo|test|e2e|pose-hands|convert-mano|fuzz> [ARGS]");
+        bail!(
+            "usage: cargo xtask <demo|test|e2e|pose-hands|convert-mano|texture|convert-html|fuzz> [ARGS]"
+        );
     };
     match cmd.as_str() {
         "demo" => bitt(&[&["demo".to_string()], rest].concat()),
-        "pose-hands" | "convert-mano" => bitt(&args),
+        "pose-hands" | "convert-mano" | "texture" | "convert-html" => bitt(&args),
         "test" => {
             let status = cargo()
                 .args(["test", "--workspace", "--release"])

@@ -1,5 +1,7 @@
 //! A small, fixed, real computation run on one backend: a padded conv2d with bias, `tanh`,
-//! a matmul and a mean-square loss, then the gradients of the conv weight and bias. The
+//! a matmul and a mean-square loss, then the gradients of the conv weight and bias; and a
+//! texture PCA turned into a UV image by the layout's gather, with the gradient of a loss on
+//! the image with respect to the PCA parameters. The
 //! numbers are printed as JSON so `cargo xtask e2e` can compare backends.
 
 use std::time::Instant;
@@ -8,6 +10,8 @@ use anyhow::{Context, Result};
 use burn::tensor::module::conv2d;
 use burn::tensor::ops::ConvOptions;
 use burn::tensor::{Device, Tensor, TensorData};
+
+use bitt_texture::{TextureLayout, TexturePca};
 
 use crate::device::DeviceName;
 
@@ -26,6 +30,50 @@ struct Numbers {
     output: Vec<f32>,
     grad_weight: Vec<f32>,
     grad_bias: Vec<f32>,
+    /// A texture PCA's UV image (sum per channel) and the gradient of a loss on that image
+    /// with respect to the PCA parameters: the compact -> image gather path.
+    texture_image_sums: Vec<f32>,
+    grad_texture_params: Vec<f32>,
+}
+
+/// A small texture PCA on a 9x7 layout (every other texel used), deterministic.
+fn texture_check(device: &Device) -> Result<(Vec<f32>, Vec<f32>)> {
+    let (w, h) = (9usize, 7usize);
+    let texels: Vec<(u32, u32)> = (0..h as u32)
+        .flat_map(|r| (0..w as u32).map(move |c| (r, c)))
+        .filter(|(r, c)| (r + c) % 2 == 0)
+        .collect();
+    let layout = TextureLayout::from_texels(w, h, texels, None)?;
+    let t = layout.num_texels();
+    let k = 4;
+    let mean = pattern(3 * t, 0.2, 0.31, 0.2)
+        .into_iter()
+        .map(|x| x + 0.5)
+        .collect();
+    let pca = TexturePca::new(layout, mean, pattern(3 * t * k, 0.05, 0.07, 1.1), k, 1.0)?;
+    let ad = device.clone().autodiff();
+    let tensors = pca.to_device(&ad);
+    let params = Tensor::<1>::from_data(TensorData::new(vec![0.3f32, -0.8, 1.2, 0.1], [k]), &ad)
+        .require_grad();
+    let image = pca
+        .layout
+        .compact_to_image_tensor(tensors.texture(params.clone()), [0.1, 0.2, 0.3]);
+    let weights = Tensor::<3>::from_data(
+        TensorData::new(pattern(3 * h * w, 1.0, 0.17, 0.4), [3, h, w]),
+        &ad,
+    );
+    let loss = (image.clone() * weights).sum();
+    let grads = loss.backward();
+    let sums = image.without_autodiff().sum_dim(2).sum_dim(1).reshape([3]);
+    let grad = params
+        .grad(&grads)
+        .context("no gradient for the texture parameters")?;
+    let read = |t: Tensor<1>| {
+        t.into_data()
+            .try_to_vec::<f32>()
+            .map_err(|e| anyhow::anyhow!("{e:?}"))
+    };
+    Ok((read(sums)?, read(grad)?))
 }
 
 /// Result of the check, printed as one JSON line.
@@ -74,7 +122,10 @@ fn compute(device: &Device) -> Result<Numbers> {
     let loss_v = vec(loss.clone().without_autodiff())?[0];
     let gw = w.grad(&grads).context("no gradient for the conv weight")?;
     let gb = b.grad(&grads).context("no gradient for the conv bias")?;
+    let (texture_image_sums, grad_texture_params) = texture_check(device)?;
     Ok(Numbers {
+        texture_image_sums,
+        grad_texture_params,
         loss: loss_v,
         output: vec(z.without_autodiff().reshape([10]))?,
         grad_weight: vec(gw.reshape([108]))?,

@@ -7,6 +7,7 @@ mod backend_check;
 mod demo;
 mod device;
 mod pose_hands;
+mod texture;
 
 use std::path::PathBuf;
 
@@ -35,6 +36,17 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Write the UV texture of a texture PCA model (HTML or procedural) for a parameter vector.
+    Texture(texture::TextureArgs),
+    /// Convert the HTML texture model (model_wosr/model.pkl, uvs*.pkl) to safetensors.
+    ConvertHtml {
+        /// Folder holding HTML's TextureBasis files as distributed.
+        #[arg(long)]
+        model_dir: PathBuf,
+        /// Folder to write html.safetensors into.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Run the built-in demo scene (procedural hands; no licensed files needed).
     Demo(demo::DemoArgs),
     /// Run a small fixed computation (conv, matmul, autodiff) on one backend and print the
@@ -52,6 +64,8 @@ fn main() -> Result<()> {
         Command::PoseHands(args) => pose_hands::run(&args),
         Command::ConvertMano { model_dir, out } => pose_hands::convert_mano(&model_dir, &out),
         Command::Demo(args) => demo::run(&args),
+        Command::Texture(args) => texture::run(&args),
+        Command::ConvertHtml { model_dir, out } => texture::convert(&model_dir, &out),
         Command::BackendCheck { device } => backend_check::run(device),
     }
 }

@@ -20,6 +20,10 @@ pub mod mano;
 pub mod model;
 pub mod procedural;
 
+/// The `glam` crate this crate's types ([`UvLayout`], [`HandModel`], ...) are built on, so
+/// that crates above can name `glam::DVec2` / `glam::DVec3` without depending on it directly.
+pub use glam;
+
 pub use annotation::{TwoHandScene, load_bitt_annotation};
 pub use camera::{OrthographicCamera, PinholeCamera};
 pub use error::MeshError;

@@ -257,6 +257,35 @@ impl NdArray {
         }
     }
 
+    /// The elements as `f32`, in C order, consuming the array: `f4` data is moved out
+    /// without a copy; `f8` rounds to the nearest `f32` (out-of-range values become
+    /// infinite), integers convert with `as`, bools are 0.0 / 1.0. Converting a large `f8`
+    /// array holds both buffers until the `f8` one is dropped (1.5 x its size).
+    pub fn into_f32(self) -> Vec<f32> {
+        match self.data {
+            ArrayData::F32(v) => v,
+            ArrayData::F64(v) => v.into_iter().map(|x| x as f32).collect(),
+            ArrayData::I32(v) => v.into_iter().map(|x| x as f32).collect(),
+            ArrayData::I64(v) => v.into_iter().map(|x| x as f32).collect(),
+            ArrayData::U32(v) => v.into_iter().map(|x| x as f32).collect(),
+            ArrayData::U8(v) => v.into_iter().map(f32::from).collect(),
+            ArrayData::Bool(v) => v.into_iter().map(|x| f32::from(u8::from(x))).collect(),
+        }
+    }
+
+    /// The elements as `f64`, in C order, consuming the array: `f8` data is moved out
+    /// without a copy; other dtypes convert as in [`NdArray::to_f64`].
+    pub fn into_f64(self) -> Vec<f64> {
+        match self.data {
+            ArrayData::F64(v) => v,
+            other => NdArray {
+                shape: self.shape,
+                data: other,
+            }
+            .to_f64(),
+        }
+    }
+
     /// The elements as `i64`, in C order. Floats are truncated toward zero with `as`
     /// (saturating at the `i64` range, NaN becomes 0); bools are 0 / 1.
     pub fn to_i64(&self) -> Vec<i64> {
@@ -453,6 +482,33 @@ mod tests {
         };
         assert_eq!(u.to_i64(), vec![4_294_967_295]);
         assert!(!u.is_empty());
+    }
+
+    #[test]
+    fn consuming_conversions() {
+        let f = NdArray {
+            shape: vec![3],
+            data: ArrayData::F64(vec![0.1, -2.5, 1e300]),
+        };
+        assert_eq!(f.clone().into_f64(), vec![0.1, -2.5, 1e300]);
+        assert_eq!(f.into_f32(), vec![0.1f32, -2.5, f32::INFINITY]);
+        let g = NdArray {
+            shape: vec![2],
+            data: ArrayData::F32(vec![1.5, -0.25]),
+        };
+        assert_eq!(g.clone().into_f32(), vec![1.5, -0.25]);
+        assert_eq!(g.into_f64(), vec![1.5, -0.25]);
+        let i = NdArray {
+            shape: vec![2],
+            data: ArrayData::I64(vec![-3, 7]),
+        };
+        assert_eq!(i.clone().into_f32(), vec![-3.0, 7.0]);
+        assert_eq!(i.into_f64(), vec![-3.0, 7.0]);
+        let b = NdArray {
+            shape: vec![2],
+            data: ArrayData::Bool(vec![true, false]),
+        };
+        assert_eq!(b.into_f32(), vec![1.0, 0.0]);
     }
 
     #[test]

@@ -1,0 +1,32 @@
+//! UV texture layouts and texture PCA models for BiTT.
+//!
+//! BiTT's coarse texture is HTML, a PCA model `T(a) = mean + basis a` over the compact vector
+//! of a UV map's valid texels; its fine stage (BTR) works on the same compact vector for both
+//! hands. This crate owns that representation: layouts ([`layout`]), PCA models ([`pca`]),
+//! the HTML loaders ([`html`]), the project's own procedural skin model ([`procedural`]) and
+//! texture images on disk ([`image_io`]). It knows nothing about networks or rendering.
+
+pub mod error;
+pub mod html;
+pub mod image_io;
+pub mod layout;
+pub mod pca;
+pub mod procedural;
+mod st;
+
+pub use error::TextureError;
+pub use html::{
+    HTML_SCALE, HTML_TEXTURE_SIZE, convert_html, load_html_model, load_html_model_sized,
+    load_html_uvs,
+};
+pub use image_io::{
+    PlanarImage, load_compact_texture, load_image, save_compact_texture, save_png8, save_png16,
+};
+pub use layout::{LayoutGather, TextureLayout};
+pub use pca::{PcaFitReport, TexturePca, TexturePcaTensors};
+pub use procedural::{
+    EvalReport, ProceduralTextureConfig, SkinIdentity, generate_texture, procedural_texture_pca,
+};
+
+#[cfg(test)]
+pub(crate) mod test_util;
