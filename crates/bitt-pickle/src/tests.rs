@@ -1708,7 +1708,7 @@ fn interhand_demo_annotation_if_present() {
 }
 
 /// Writes the seed corpus of the `from_bytes` fuzz target (run on demand:
-/// `cargo test -p bitt-pickle -- --ignored write_fuzz_seed_corpus`).
+/// `cargo test --release --workspace write_fuzz_seed_corpus -- --ignored`).
 #[test]
 #[ignore = "writes files into fuzz/corpus; run on demand"]
 fn write_fuzz_seed_corpus() {
@@ -1728,4 +1728,23 @@ fn write_fuzz_seed_corpus() {
         assert!(from_bytes(p, "seed").is_ok());
         std::fs::write(dir.join(format!("seed_{i:02}.pkl")), p).unwrap();
     }
+}
+
+/// Every committed fuzz seed parses or fails with an error, never a panic; the seeds that
+/// are valid pickles stay valid.
+#[test]
+fn fuzz_seed_corpus_replays() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/corpus/from_bytes");
+    let mut seen = 0;
+    let mut ok = 0;
+    for entry in std::fs::read_dir(&dir).expect("the seed corpus is committed") {
+        let path = entry.unwrap().path();
+        let bytes = std::fs::read(&path).unwrap();
+        seen += 1;
+        if crate::from_bytes(&bytes, &path.display().to_string()).is_ok() {
+            ok += 1;
+        }
+    }
+    assert!(seen >= 3, "only {seen} seeds in {}", dir.display());
+    assert!(ok >= 3, "only {ok} of {seen} seeds parse");
 }
