@@ -79,6 +79,17 @@ pub enum RenderError {
         /// Requested channels per vertex.
         num_attrs: usize,
     },
+    /// A texture has zero channels.
+    #[error("texture must have at least one channel")]
+    ZeroChannels,
+    /// A texture coordinate of a sampled (unmasked) pixel contains NaN or infinity.
+    #[error("uv of pixel {pixel} is not finite: {value:?}")]
+    NonFiniteUv {
+        /// Index of the offending pixel.
+        pixel: usize,
+        /// Its texture coordinate (u, v).
+        value: [f32; 2],
+    },
 }
 
 /// Checks the image size and returns the pixel count.

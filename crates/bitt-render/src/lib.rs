@@ -6,7 +6,11 @@
 //! * [`rasterize_backward`] gives the analytic interior gradient of the barycentrics (and
 //!   optionally depth) w.r.t. the clip positions, like nvdiffrast's rasterize backward without
 //!   antialiasing/silhouette terms;
-//! * [`interpolate`] / [`interpolate_backward`] interpolate per-vertex attributes and back.
+//! * [`interpolate`] / [`interpolate_backward`] interpolate per-vertex attributes and back;
+//! * [`texture`] / [`texture_backward`] sample a `[C, Ht, Wt]` texture bilinearly at per-pixel
+//!   UVs and back, like the BiTT reference's `grid_sample(align_corners=True,
+//!   padding_mode='border')` with `v = 0` at the texture's bottom row (see the module docs);
+//!   [`coverage_mask`] turns [`Fragments`] into its pixel mask.
 //!
 //! # Conventions
 //! * **Input** positions are clip space `[V][4]` = (x, y, z, w) as produced by a projection;
@@ -38,11 +42,13 @@ mod clip;
 mod error;
 mod interpolate;
 mod raster;
+mod texture;
 
 pub use backward::rasterize_backward;
 pub use error::{MAX_IMAGE_SIDE, RenderError};
 pub use interpolate::{interpolate, interpolate_backward};
 pub use raster::{Fragments, rasterize};
+pub use texture::{coverage_mask, texture, texture_backward};
 
 // Index loops mirror the maths in the tests.
 #[cfg(test)]

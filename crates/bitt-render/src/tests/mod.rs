@@ -6,6 +6,7 @@ mod errors;
 mod grads;
 mod near;
 mod single;
+mod texture;
 
 use crate::raster::for_each_fragment;
 
