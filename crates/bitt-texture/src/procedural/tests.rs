@@ -199,6 +199,12 @@ fn skin_tones_vary_across_identities() {
     );
 }
 
+/// Root-mean-square difference of two textures of the same length.
+fn rmse_between(a: &[f32], b: &[f32]) -> f64 {
+    let sum: f64 = a.iter().zip(b).map(|(x, y)| f64::from(x - y).powi(2)).sum();
+    (sum / a.len() as f64).sqrt()
+}
+
 #[test]
 fn left_and_right_are_highly_correlated_but_not_identical() {
     for seed in [1, 7, 12] {
@@ -206,26 +212,14 @@ fn left_and_right_are_highly_correlated_but_not_identical() {
         let (l, r) = (texture(&id, Side::Left), texture(&id, Side::Right));
         let corr = pearson(&l, &r);
         assert!(corr > 0.9, "seed {seed}: correlation {corr:.3}");
-        let rmse = (l
-            .iter()
-            .zip(&r)
-            .map(|(a, b)| f64::from(a - b).powi(2))
-            .sum::<f64>()
-            / l.len() as f64)
-            .sqrt();
+        let rmse = rmse_between(&l, &r);
         assert!(
             rmse > 0.003,
             "seed {seed}: left and right nearly identical ({rmse:.4})"
         );
         // Another person is much less alike than the other hand.
         let other = texture(&SkinIdentity::sample(seed + 100), Side::Right);
-        let other_rmse = (other
-            .iter()
-            .zip(&r)
-            .map(|(a, b)| f64::from(a - b).powi(2))
-            .sum::<f64>()
-            / l.len() as f64)
-            .sqrt();
+        let other_rmse = rmse_between(&other, &r);
         assert!(
             other_rmse > 2.0 * rmse,
             "seed {seed}: {other_rmse:.4} vs {rmse:.4}"
