@@ -1,4 +1,4 @@
-//! Analytic backward pass of [`crate::rasterize`] (interior gradients only).
+//! Analytic backward pass of [`crate::cpu::rasterize`] (interior gradients only).
 //!
 //! # Derivation
 //! Let the face's clip vertices be `C_j = (x_j, y_j, z_j, w_j)` and the pixel centre be at

@@ -90,6 +90,33 @@ pub enum RenderError {
         /// Its texture coordinate (u, v).
         value: [f32; 2],
     },
+    /// A tensor argument has the wrong shape.
+    #[error("tensor `{what}` has shape {actual:?}, expected {expected}")]
+    TensorShape {
+        /// Which argument.
+        what: &'static str,
+        /// The expected shape, in words (e.g. `[V, 4]` with V = 778).
+        expected: String,
+        /// The actual shape.
+        actual: Vec<usize>,
+    },
+    /// A camera cannot be used for projection.
+    #[error("unusable camera: {0}")]
+    BadCamera(String),
+    /// A light has non-finite or out-of-range values.
+    #[error("unusable light: {0}")]
+    BadLight(String),
+    /// A UV layout does not fit the mesh it is used with.
+    #[error("texture layout does not fit the mesh: {0}")]
+    BadLayout(String),
+    /// Reading a tensor back from its device failed.
+    #[error("cannot read tensor `{what}` back from the device: {reason}")]
+    TensorRead {
+        /// Which argument.
+        what: &'static str,
+        /// The backend's message.
+        reason: String,
+    },
 }
 
 /// Checks the image size and returns the pixel count.

@@ -1,16 +1,16 @@
-//! CPU core of an nvdiffrast-style differentiable rasterizer (pure Rust, `f32` I/O, `f64`
-//! internally).
+//! nvdiffrast-style differentiable rendering for BiTT, in three layers:
 //!
-//! * [`rasterize`] turns clip-space triangles into per-pixel [`Fragments`] (face id,
-//!   perspective-correct barycentrics, depth);
-//! * [`rasterize_backward`] gives the analytic interior gradient of the barycentrics (and
-//!   optionally depth) w.r.t. the clip positions, like nvdiffrast's rasterize backward without
-//!   antialiasing/silhouette terms;
-//! * [`interpolate`] / [`interpolate_backward`] interpolate per-vertex attributes and back;
-//! * [`texture`] / [`texture_backward`] sample a `[C, Ht, Wt]` texture bilinearly at per-pixel
-//!   UVs and back, like the BiTT reference's `grid_sample(align_corners=True,
-//!   padding_mode='border')` with `v = 0` at the texture's bottom row (see the module docs);
-//!   [`coverage_mask`] turns [`Fragments`] into its pixel mask.
+//! * [`cpu`] — the CPU core on host slices (`f32` in and out, `f64` inside): a z-buffer
+//!   rasterizer with exact edge functions and near-plane clipping, interpolation, bilinear
+//!   texture sampling, and their hand-written backward passes;
+//! * [`ops`] — the primitives as burn tensor functions on any device ([`rasterize`],
+//!   [`interpolate`], [`texture`], [`antialias`]): the discrete decisions (coverage,
+//!   texel footprints, silhouette pairs) come from the core, the differentiable quantities
+//!   are tensor expressions whose autodiff is the analytic gradient (see [`ops`]);
+//! * [`scene`] — cameras to clip space, Phong shading with a point light as the reference's
+//!   PyTorch3D setup computes it, several textured meshes in one depth test (the two
+//!   hands), image-to-UV unwrapping with visible masks, and the paper's texel visibility
+//!   statistics (Table 3).
 //!
 //! # Conventions
 //! * **Input** positions are clip space `[V][4]` = (x, y, z, w) as produced by a projection;
@@ -33,7 +33,7 @@
 //!   vertices, so the output always refers to the original face. Because coverage uses snapped
 //!   positions, barycentrics of pixels within ~1e-5 px of an edge may be very slightly negative.
 //! * **Depth test**: nearest wins; ties go to the lower face index.
-//! * **Backward**: [`rasterize_backward`] treats near-clipped faces like any other face (the
+//! * **Backward**: [`cpu::rasterize_backward`] treats near-clipped faces like any other face (the
 //!   barycentrics at a pixel centre do not depend on clipping); see its module docs for the
 //!   derivation.
 
@@ -41,14 +41,26 @@ mod backward;
 mod clip;
 mod error;
 mod interpolate;
+pub mod ops;
 mod raster;
+pub mod scene;
 mod texture;
 
-pub use backward::rasterize_backward;
 pub use error::{MAX_IMAGE_SIDE, RenderError};
-pub use interpolate::{interpolate, interpolate_backward};
-pub use raster::{Fragments, rasterize};
-pub use texture::{coverage_mask, texture, texture_backward};
+pub use ops::{
+    Raster, SilhouettePairs, Topology, antialias, interpolate, rasterize, silhouette_pairs, texture,
+};
+pub use raster::Fragments;
+
+/// The CPU core: the primitives on host slices (`f32` in and out, `f64` inside), with
+/// hand-written backward passes. [`ops`] builds the burn primitives on it; the tests use the
+/// backward passes as the independent reference for the autodiff gradients.
+pub mod cpu {
+    pub use crate::backward::rasterize_backward;
+    pub use crate::interpolate::{interpolate, interpolate_backward};
+    pub use crate::raster::{Fragments, rasterize};
+    pub use crate::texture::{coverage_mask, texture, texture_backward};
+}
 
 // Index loops mirror the maths in the tests.
 #[cfg(test)]

@@ -14,7 +14,7 @@
 //! * at an interior integer position the lower texel is the base one (`floor`), so the uv
 //!   gradient there is the one-sided derivative towards the next texel, as in PyTorch.
 //!
-//! Outputs are pixel-major (`out[p * C + c]`) so they compose with [`crate::interpolate`]'s
+//! Outputs are pixel-major (`out[p * C + c]`) so they compose with [`crate::cpu::interpolate`]'s
 //! `[H * W * A]` output (interpolate 2-channel UVs, then sample). Arithmetic is `f64`
 //! internally.
 

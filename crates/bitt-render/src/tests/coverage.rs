@@ -1,7 +1,7 @@
 //! Shared edges: every pixel of a tiled region is drawn exactly once.
 
 use super::{Rng, coverage, screen_clip};
-use crate::rasterize;
+use crate::cpu::rasterize;
 
 const W: usize = 20;
 const H: usize = 18;

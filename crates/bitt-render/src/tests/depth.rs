@@ -1,7 +1,7 @@
 //! Depth test: nearest wins, deterministic ties, cube front faces, far plane.
 
 use super::{Camera, screen_clip};
-use crate::rasterize;
+use crate::cpu::rasterize;
 
 const N: usize = 16;
 

@@ -1,8 +1,7 @@
 //! Bad input is rejected with clear errors.
 
-use crate::{
-    Fragments, RenderError, interpolate, interpolate_backward, rasterize, rasterize_backward,
-};
+use crate::RenderError;
+use crate::cpu::{Fragments, interpolate, interpolate_backward, rasterize, rasterize_backward};
 
 fn tri() -> Vec<[f32; 4]> {
     vec![

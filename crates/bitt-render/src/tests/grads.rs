@@ -1,7 +1,7 @@
 //! Analytic gradients vs central finite differences.
 
 use super::{Camera, Rng};
-use crate::{Fragments, interpolate, interpolate_backward, rasterize, rasterize_backward};
+use crate::cpu::{Fragments, interpolate, interpolate_backward, rasterize, rasterize_backward};
 
 const W: usize = 24;
 const H: usize = 20;

@@ -5,6 +5,8 @@ mod depth;
 mod errors;
 mod grads;
 mod near;
+mod ops;
+mod scene;
 mod single;
 mod texture;
 

@@ -1,7 +1,7 @@
 //! Near-plane clipping: barycentrics of the visible part match a ray–triangle intersection.
 
 use super::{Camera, pixel_ndc};
-use crate::rasterize;
+use crate::cpu::rasterize;
 
 const CAM: Camera = Camera {
     focal: 1.2,

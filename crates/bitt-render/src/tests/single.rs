@@ -1,7 +1,7 @@
 //! A single triangle: exact coverage, barycentrics, perspective correction.
 
 use super::{Camera, covered_pixels, pixel_ndc, screen_clip};
-use crate::rasterize;
+use crate::cpu::rasterize;
 
 const N: usize = 4;
 

@@ -2,7 +2,8 @@
 //! `v = 0` at the bottom row) and its backward pass.
 
 use super::Rng;
-use crate::{RenderError, coverage_mask, interpolate, rasterize, texture, texture_backward};
+use crate::RenderError;
+use crate::cpu::{coverage_mask, interpolate, rasterize, texture, texture_backward};
 
 /// `[C, Ht, Wt]` image with random values in `[0, 1)`.
 fn random_image(rng: &mut Rng, c: usize, h: usize, w: usize) -> Vec<f32> {

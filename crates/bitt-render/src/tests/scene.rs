@@ -1,0 +1,570 @@
+//! The scene layer: projection, Phong shading against an independent implementation, two
+//! procedural hands in one depth test, unwrapping and texel statistics.
+
+use bitt_mesh::glam::{DMat3, DVec3};
+use bitt_mesh::lbs::{HandParams, HandPose};
+use bitt_mesh::model::{NUM_BETAS, NUM_POSE};
+use bitt_mesh::{HandModel, OrthographicCamera, PinholeCamera, Side, procedural_pair};
+use bitt_texture::TextureLayout;
+use burn::tensor::{Device, Tensor, TensorData};
+
+use super::Rng;
+use crate::scene::{
+    Camera, DepthRange, LightValues, Material, PointLight, RenderSettings, Scene, TexelSurface,
+    TexelVisibilityStats, TexturedMesh, UnwrapSettings, phong, render, unwrap,
+};
+
+#[allow(deprecated)] // burn-ndarray is deprecated upstream but still a supported backend here
+fn devices() -> Vec<(&'static str, Device)> {
+    vec![
+        ("flex", Device::flex().autodiff()),
+        ("ndarray", Device::ndarray().autodiff()),
+    ]
+}
+
+fn to_vec<const D: usize>(t: Tensor<D>) -> Vec<f32> {
+    t.into_data()
+        .convert::<f32>()
+        .try_into_vec::<f32>()
+        .expect("readback")
+}
+
+fn tensor2(values: Vec<f32>, shape: [usize; 2], device: &Device) -> Tensor<2> {
+    Tensor::from_data(TensorData::new(values, shape), device)
+}
+
+#[test]
+fn pinhole_and_orthographic_projection_match_the_cameras() {
+    let device = Device::flex();
+    let mut cam = PinholeCamera::looking_down_z(500.0, 200, 160);
+    cam.rotation = DMat3::from_rotation_y(0.3) * DMat3::from_rotation_x(-0.2);
+    cam.translation = DVec3::new(0.02, -0.01, 0.6);
+    cam.intrinsics.z_axis.x = 93.0;
+    cam.intrinsics.y_axis.x = 1.5; // skew
+    let ortho = OrthographicCamera {
+        rotation: DMat3::from_rotation_z(0.4),
+        translation: DVec3::new(0.0, 0.0, 1.0),
+        scale: 900.0,
+        offset: bitt_mesh::glam::DVec2::new(101.0, 77.0),
+        width: 200,
+        height: 160,
+    };
+    let mut rng = Rng::new(3);
+    let points: Vec<DVec3> = (0..20)
+        .map(|_| {
+            DVec3::new(
+                rng.uniform(-0.1, 0.1),
+                rng.uniform(-0.1, 0.1),
+                rng.uniform(-0.1, 0.1),
+            )
+        })
+        .collect();
+    let flat: Vec<f32> = points
+        .iter()
+        .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+        .collect();
+    let depth = DepthRange::default();
+    for camera in [Camera::Pinhole(cam), Camera::Orthographic(ortho)] {
+        let clip = camera
+            .clip_positions(tensor2(flat.clone(), [20, 3], &device), depth)
+            .unwrap();
+        let clip = to_vec(clip);
+        for (i, p) in points.iter().enumerate() {
+            let (pixel, z) = match camera {
+                Camera::Pinhole(c) => (c.project(*p).unwrap(), c.world_to_camera(*p).z),
+                Camera::Orthographic(c) => (c.project(*p), c.world_to_camera(*p).z),
+            };
+            let c = &clip[4 * i..4 * i + 4];
+            let ndc = [c[0] / c[3], c[1] / c[3], c[2] / c[3]];
+            let want_x = 2.0 * pixel.x / 200.0 - 1.0;
+            let want_y = 2.0 * pixel.y / 160.0 - 1.0;
+            assert!((f64::from(ndc[0]) - want_x).abs() < 1e-5, "{camera:?}: x");
+            assert!((f64::from(ndc[1]) - want_y).abs() < 1e-5, "{camera:?}: y");
+            let back = camera.view_depth(f64::from(ndc[2]), depth);
+            assert!(
+                (back - z).abs() < 1e-3 * z.abs().max(1.0),
+                "{camera:?}: depth {back} vs {z}"
+            );
+        }
+    }
+}
+
+/// PyTorch3D's Phong formula, written out per pixel in f64.
+fn phong_reference(
+    texel: [f64; 3],
+    normal: [f64; 3],
+    point: [f64; 3],
+    camera: [f64; 3],
+    light: &LightValues,
+    material: &Material,
+) -> [f64; 3] {
+    let unit = |v: [f64; 3]| {
+        let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt().max(1e-6);
+        [v[0] / n, v[1] / n, v[2] / n]
+    };
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let n = unit(normal);
+    let loc = light.location.map(f64::from);
+    let l = unit([loc[0] - point[0], loc[1] - point[1], loc[2] - point[2]]);
+    let v = unit([
+        camera[0] - point[0],
+        camera[1] - point[1],
+        camera[2] - point[2],
+    ]);
+    let cos = dot(n, l);
+    let r = [
+        2.0 * cos * n[0] - l[0],
+        2.0 * cos * n[1] - l[1],
+        2.0 * cos * n[2] - l[2],
+    ];
+    let spec = if cos > 0.0 {
+        dot(v, r).max(0.0).powf(f64::from(material.shininess))
+    } else {
+        0.0
+    };
+    std::array::from_fn(|c| {
+        let ambient = f64::from(light.ambient[c]) * f64::from(material.ambient[c]);
+        let diffuse = f64::from(light.diffuse[c]) * f64::from(material.diffuse[c]) * cos.max(0.0);
+        (ambient + diffuse) * texel[c]
+            + f64::from(light.specular[c]) * f64::from(material.specular[c]) * spec
+    })
+}
+
+#[test]
+fn phong_matches_an_independent_implementation() {
+    for (name, device) in devices() {
+        let light = LightValues {
+            ambient: [0.3, 0.35, 0.4],
+            diffuse: [0.7, 0.6, 0.5],
+            specular: [0.4, 0.3, 0.2],
+            location: [0.3, -0.5, -0.2],
+        };
+        for material in [
+            Material::default(),
+            Material {
+                ambient: [0.9, 1.0, 0.8],
+                diffuse: [1.0, 0.7, 0.9],
+                specular: [0.6, 0.5, 0.4],
+                shininess: 8.0,
+            },
+        ] {
+            let n = 64;
+            let mut rng = Rng::new(17);
+            let mut draw = |lo: f64, hi: f64| -> Vec<f64> {
+                (0..3 * n).map(|_| rng.uniform(lo, hi)).collect()
+            };
+            let (texels, normals, points) = (draw(0.0, 1.0), draw(-1.0, 1.0), draw(-0.2, 0.2));
+            let camera = [0.05, 0.02, -0.7];
+            let to_cam: Vec<f64> = (0..3 * n).map(|i| camera[i % 3] - points[i]).collect();
+            let t = |v: &[f64]| tensor2(v.iter().map(|&x| x as f32).collect(), [n, 3], &device);
+            let out = phong(
+                t(&texels),
+                t(&normals),
+                t(&points),
+                t(&to_cam),
+                &light.to_light(&device),
+                &material,
+            );
+            let out = to_vec(out);
+            for k in 0..n {
+                let p = |v: &[f64]| [v[3 * k], v[3 * k + 1], v[3 * k + 2]];
+                let want = phong_reference(
+                    p(&texels),
+                    p(&normals),
+                    p(&points),
+                    camera,
+                    &light,
+                    &material,
+                );
+                for c in 0..3 {
+                    assert!(
+                        (f64::from(out[3 * k + c]) - want[c]).abs() < 1e-4,
+                        "{name}: pixel {k} channel {c}: {} vs {}",
+                        out[3 * k + c],
+                        want[c]
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// Two procedural hands facing each other, fingers up, the right one in front of the left
+/// one's fingers, in front of a 96x96 pinhole camera.
+struct HandScene {
+    meshes: [TexturedMesh; 2],
+    vertices: [Vec<DVec3>; 2],
+    camera: Camera,
+    /// Per hand: the 64x64 layout and the mesh faces (the left hand's corners are in
+    /// mirrored order, so each hand needs its own texel barycentrics).
+    layouts: [TextureLayout; 2],
+    faces: [Vec<[u32; 3]>; 2],
+}
+
+fn hand_scene(size: u32) -> HandScene {
+    let pair = procedural_pair();
+    let facing = DMat3::from_cols(DVec3::Y, DVec3::X, DVec3::NEG_Z);
+    let mirror = DMat3::from_diagonal(DVec3::new(-1.0, 1.0, 1.0));
+    let right_root = DMat3::from_rotation_y(0.5) * facing;
+    let pose = |model: &HandModel, root: DMat3, wrist: DVec3| {
+        let rest = model.regress_joints(&model.shaped_vertices(&[0.0; NUM_BETAS]))[0];
+        let params = HandParams {
+            root_rotation: root,
+            pose: HandPose::Pca(vec![0.0; NUM_POSE]),
+            betas: vec![0.0; NUM_BETAS],
+            trans: wrist - rest,
+        };
+        model.forward(&params).unwrap().vertices
+    };
+    let left = pose(
+        pair.get(Side::Left),
+        mirror * right_root * mirror,
+        DVec3::new(-0.02, 0.08, 0.5),
+    );
+    let right = pose(
+        pair.get(Side::Right),
+        right_root,
+        DVec3::new(0.02, 0.085, 0.47),
+    );
+    let mesh = |model: &HandModel| {
+        let uv = model.uv.as_ref().expect("procedural hands have UVs");
+        TexturedMesh::new(
+            model.faces.clone(),
+            model.num_vertices(),
+            uv.faces.clone(),
+            uv.uvs.iter().map(|p| [p.x as f32, p.y as f32]).collect(),
+        )
+        .unwrap()
+    };
+    let right_model = pair.get(Side::Right);
+    let left_model = pair.get(Side::Left);
+    let layout = |m: &HandModel| TextureLayout::from_uv(m.uv.as_ref().unwrap(), 64, 64, 1).unwrap();
+    HandScene {
+        meshes: [mesh(left_model), mesh(right_model)],
+        vertices: [left, right],
+        camera: Camera::Pinhole(PinholeCamera::looking_down_z(
+            240.0 * f64::from(size) / 96.0,
+            size,
+            size,
+        )),
+        layouts: [layout(left_model), layout(right_model)],
+        faces: [left_model.faces.clone(), right_model.faces.clone()],
+    }
+}
+
+fn vertex_tensor(v: &[DVec3], device: &Device) -> Tensor<2> {
+    tensor2(
+        v.iter()
+            .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+            .collect(),
+        [v.len(), 3],
+        device,
+    )
+}
+
+#[test]
+fn two_procedural_hands_render_with_mutual_occlusion() {
+    for (name, device) in devices() {
+        let s = hand_scene(96);
+        let scene = Scene::new(&[&s.meshes[0], &s.meshes[1]]).unwrap();
+        let verts = [
+            vertex_tensor(&s.vertices[0], &device),
+            vertex_tensor(&s.vertices[1], &device),
+        ];
+        let white = || Tensor::<3>::ones([3, 4, 4], &device);
+        let light = LightValues {
+            ambient: [0.4; 3],
+            diffuse: [0.6; 3],
+            specular: [0.0; 3],
+            location: [0.0, 0.0, 0.0],
+        }
+        .to_light(&device);
+        let settings = RenderSettings {
+            antialias: false,
+            ..RenderSettings::default()
+        };
+        let both = render(
+            &scene,
+            &verts,
+            &[white(), white()],
+            &s.camera,
+            &light,
+            &settings,
+        )
+        .unwrap();
+        let alone = |i: usize| {
+            let one = Scene::new(&[&s.meshes[i]]).unwrap();
+            render(
+                &one,
+                &verts[i..i + 1],
+                &[white()],
+                &s.camera,
+                &light,
+                &settings,
+            )
+            .unwrap()
+        };
+        let (left, right) = (alone(0), alone(1));
+        let ml = to_vec(both.masks[0].clone());
+        let mr = to_vec(both.masks[1].clone());
+        let (mut overlap, mut n_left, mut n_right) = (0, 0, 0);
+        for p in 0..96 * 96 {
+            let (dl, dr) = (
+                left.raster.fragments.depth[p],
+                right.raster.fragments.depth[p],
+            );
+            assert!(
+                !(ml[p] == 1.0 && mr[p] == 1.0),
+                "{name}: masks overlap at {p}"
+            );
+            if dl.is_finite() && dr.is_finite() {
+                overlap += 1;
+                let left_wins = dl < dr;
+                assert_eq!(ml[p] == 1.0, left_wins, "{name}: pixel {p}");
+            }
+            n_left += usize::from(ml[p] == 1.0);
+            n_right += usize::from(mr[p] == 1.0);
+        }
+        assert!(
+            overlap > 50,
+            "{name}: the hands should overlap in the image ({overlap} px)"
+        );
+        assert!(
+            n_left > 300 && n_right > 300,
+            "{name}: {n_left} / {n_right} px"
+        );
+        // Outward normals: a light at the camera lights the visible surface (shaded value
+        // above the ambient level) almost everywhere.
+        let img = to_vec(both.image.clone());
+        let covered: Vec<usize> = (0..96 * 96).filter(|&p| ml[p] + mr[p] > 0.0).collect();
+        let lit = covered.iter().filter(|&&p| img[p] > 0.45).count();
+        assert!(
+            lit as f64 > 0.9 * covered.len() as f64,
+            "{name}: {lit} of {} lit",
+            covered.len()
+        );
+    }
+}
+
+#[test]
+fn unwrapping_a_render_recovers_the_texture_on_visible_texels() {
+    for (name, device) in devices() {
+        let s = hand_scene(160);
+        let scene = Scene::new(&[&s.meshes[0], &s.meshes[1]]).unwrap();
+        let verts = [
+            vertex_tensor(&s.vertices[0], &device),
+            vertex_tensor(&s.vertices[1], &device),
+        ];
+        // A texture that is smooth on the surface, also across UV chart seams: each texel's
+        // colour is a linear ramp of its 3D point on the right hand (gutter texels sit on
+        // chart borders, so the texture image is continuous across seams too).
+        let (th, tw) = (64, 64);
+        let right_surface =
+            TexelSurface::new(&s.layouts[1], &s.faces[1], s.vertices[1].len()).unwrap();
+        let pts = right_surface.points(&s.vertices[1]).unwrap();
+        let t = pts.len();
+        let centre = pts.iter().copied().sum::<DVec3>() / t as f64;
+        let mut truth = vec![0.0f32; 3 * t];
+        for (k, p) in pts.iter().enumerate() {
+            let d = (*p - centre) * 4.0;
+            truth[k] = (0.5 + d.x).clamp(0.0, 1.0) as f32;
+            truth[t + k] = (0.5 + d.y).clamp(0.0, 1.0) as f32;
+            truth[2 * t + k] = (0.5 + d.z).clamp(0.0, 1.0) as f32;
+        }
+        let tex = s.layouts[1].compact_to_image(&truth, [0.0; 3]).unwrap();
+        let texture = Tensor::<3>::from_data(TensorData::new(tex.clone(), [3, th, tw]), &device);
+        // Pure ambient light: the render is the texture itself.
+        let light = LightValues {
+            ambient: [1.0; 3],
+            diffuse: [0.0; 3],
+            specular: [0.0; 3],
+            location: [0.0; 3],
+        }
+        .to_light(&device);
+        let settings = RenderSettings {
+            antialias: false,
+            ..RenderSettings::default()
+        };
+        let out = render(
+            &scene,
+            &verts,
+            &[texture.clone(), texture.clone()],
+            &s.camera,
+            &light,
+            &settings,
+        )
+        .unwrap();
+        assert_eq!(
+            s.layouts[0].texels, s.layouts[1].texels,
+            "one layout serves both hands"
+        );
+        let mut masks = Vec::new();
+        for hand in 0..2 {
+            let surface =
+                TexelSurface::new(&s.layouts[hand], &s.faces[hand], s.vertices[hand].len())
+                    .unwrap();
+            let un = unwrap(
+                out.image.clone(),
+                &s.camera,
+                &surface,
+                &s.vertices[hand],
+                &out.raster,
+                &UnwrapSettings::default(),
+            )
+            .unwrap();
+            let u = to_vec(un.texels.clone());
+            let visible = un.visible_host.clone();
+            let count = visible.iter().filter(|&&v| v).count();
+            assert!(
+                count > t / 20,
+                "{name}: hand {hand}: only {count} of {t} texels visible"
+            );
+            assert!(
+                count < 3 * t / 4,
+                "{name}: hand {hand}: {count} of {t} visible (too many)"
+            );
+            // Most visible texels get their own colour back (bilinear resampling twice, a
+            // 64x64 texture on a 160x160 image); texels on chart seams or silhouettes pick up
+            // a neighbour's colour, so the tail is looser.
+            let mut errs: Vec<f32> = (0..t)
+                .filter(|&k| visible[k])
+                .map(|k| {
+                    (0..3)
+                        .map(|c| (u[c * t + k] - truth[c * t + k]).abs())
+                        .fold(0.0, f32::max)
+                })
+                .collect();
+            errs.sort_by(f32::total_cmp);
+            let (median, p90) = (errs[errs.len() / 2], errs[errs.len() * 9 / 10]);
+            eprintln!("{name}: hand {hand}: {count} visible, error median {median} p90 {p90}");
+            assert!(
+                median < 0.01 && p90 < 0.05,
+                "{name}: hand {hand}: median {median}, p90 {p90}"
+            );
+            // Invisible texels are zero in u.
+            assert!(
+                (0..t).filter(|&k| !visible[k]).all(|k| u[k] == 0.0),
+                "{name}"
+            );
+            masks.push(visible);
+        }
+        let stats = TexelVisibilityStats::from_masks(&masks[0], &masks[1]).unwrap();
+        let sum = stats.invisible
+            + stats.symmetric_usable
+            + (stats.left_visible + stats.right_visible - stats.symmetric_usable) / 2.0;
+        assert!((sum - 1.0).abs() < 1e-9, "{name}: {stats:?}");
+        assert!(stats.invisible > 0.05, "{name}: {stats:?}");
+    }
+}
+
+#[test]
+fn unwrap_is_differentiable_in_the_image() {
+    let device = Device::flex().autodiff();
+    let s = hand_scene(64);
+    let scene = Scene::new(&[&s.meshes[0], &s.meshes[1]]).unwrap();
+    let verts = [
+        vertex_tensor(&s.vertices[0], &device),
+        vertex_tensor(&s.vertices[1], &device),
+    ];
+    let white = Tensor::<3>::ones([3, 4, 4], &device);
+    let light = LightValues::default().to_light(&device);
+    let out = render(
+        &scene,
+        &verts,
+        &[white.clone(), white],
+        &s.camera,
+        &light,
+        &RenderSettings::default(),
+    )
+    .unwrap();
+    let image = Tensor::<3>::ones([3, 64, 64], &device).require_grad();
+    let surface = TexelSurface::new(&s.layouts[0], &s.faces[0], s.vertices[0].len()).unwrap();
+    let un = unwrap(
+        image.clone(),
+        &s.camera,
+        &surface,
+        &s.vertices[0],
+        &out.raster,
+        &UnwrapSettings::default(),
+    )
+    .unwrap();
+    let visible = un.visible_host.iter().filter(|&&v| v).count() as f32;
+    let grads = un.texels.sum().backward();
+    let g = to_vec(image.grad(&grads).unwrap());
+    // Each visible texel spreads a total weight of 1 per channel over the image.
+    let total: f32 = g.iter().sum();
+    assert!(
+        (total - 3.0 * visible).abs() < 1e-2 * visible,
+        "{total} vs {}",
+        3.0 * visible
+    );
+}
+
+#[test]
+fn render_gradients_reach_the_light_and_the_texture() {
+    for (name, device) in devices() {
+        let s = hand_scene(48);
+        let scene = Scene::new(&[&s.meshes[0], &s.meshes[1]]).unwrap();
+        let verts = [
+            vertex_tensor(&s.vertices[0], &device),
+            vertex_tensor(&s.vertices[1], &device),
+        ];
+        let values = LightValues {
+            ambient: [0.3; 3],
+            diffuse: [0.6; 3],
+            specular: [0.2; 3],
+            location: [0.05, -0.1, 0.2],
+        };
+        let light_t =
+            Tensor::<1>::from_data(TensorData::new(values.to_array().to_vec(), [12]), &device)
+                .require_grad();
+        let tex =
+            Tensor::<3>::from_data(TensorData::new(vec![0.6f32; 3 * 8 * 8], [3, 8, 8]), &device)
+                .require_grad();
+        let material = Material {
+            specular: [0.5; 3],
+            shininess: 4.0,
+            ..Material::default()
+        };
+        let settings = RenderSettings {
+            material,
+            ..RenderSettings::default()
+        };
+        let eval = |light: Tensor<1>, tex: Tensor<3>| {
+            let light = PointLight::from_tensor(light).unwrap();
+            let out = render(
+                &scene,
+                &verts,
+                &[tex.clone(), tex],
+                &s.camera,
+                &light,
+                &settings,
+            )
+            .unwrap();
+            out.image.sum()
+        };
+        let grads = eval(light_t.clone(), tex.clone()).backward();
+        let g = to_vec(light_t.grad(&grads).unwrap());
+        let gt = to_vec(tex.grad(&grads).unwrap());
+        assert!(
+            gt.iter().sum::<f32>() > 1.0,
+            "{name}: texture gradient {gt:?}"
+        );
+        let base = values.to_array();
+        for i in 0..12 {
+            let eps = 1e-2;
+            let at = |d: f32| {
+                let mut v = base;
+                v[i] += d;
+                let l = Tensor::<1>::from_data(TensorData::new(v.to_vec(), [12]), &device);
+                to_vec(eval(l, tex.clone()).reshape([1]))[0]
+            };
+            let fd = (at(eps) - at(-eps)) / (2.0 * eps);
+            assert!(
+                (fd - g[i]).abs() <= 2e-2 * fd.abs().max(1.0),
+                "{name}: d image / d light[{i}]: autodiff {} vs finite difference {fd}",
+                g[i]
+            );
+        }
+    }
+}
