@@ -6,8 +6,15 @@
 //! - `demo [ARGS]`: the built-in demo scene (`bitt demo`).
 //! - `test`: the whole test suite (release build) and then `e2e`.
 //! - `e2e`: the same computation on every backend (flex, ndarray, wgpu), compared.
-//! - `pose-hands`, `convert-mano`, `texture`, `convert-html` ARGS: forwarded to `bitt`.
+//! - `pose-hands`, `convert-mano`, `texture`, `convert-html`, `render` ARGS: forwarded to
+//!   `bitt`.
 //! - `fuzz [--seconds N]`: fuzz the pickle reader with cargo-fuzz.
+//! - `nets [--preset P]`: the networks' parameter counts and output shapes (JSON).
+//! - `bench btr|albedo|nets [--preset P]`: burn vs PyTorch timings, side by side.
+
+mod bench;
+mod bench_render;
+mod nets;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitStatus};
@@ -212,12 +219,69 @@ fn e2e() -> Result<()> {
         .status()?;
     check(status, "bitt texture --model")?;
     println!("e2e texture fitted, saved, reloaded and wrote a 128x128 UV texture");
+    // The renderer end to end: the demo scene on flex and on wgpu, images compared.
+    let render_diff = render_on_backends(&bin, &scratch)?;
+    println!("e2e render --demo: wgpu vs flex mean |difference| {render_diff:.2e}");
+    if render_diff >= 1e-3 {
+        failed = true;
+        println!("e2e render differs between flex and wgpu");
+    }
     let _ = std::fs::remove_dir_all(&scratch);
     if failed {
         bail!("backends disagree");
     }
-    println!("e2e: 4 passed, 0 failed");
+    println!("e2e: 5 passed, 0 failed");
     Ok(())
+}
+
+/// Renders the demo scene with `bitt render` on flex and on wgpu; returns the mean absolute
+/// difference of the two images (values in `[0, 1]`).
+fn render_on_backends(bin: &Path, scratch: &Path) -> Result<f64> {
+    for device in ["flex", "wgpu"] {
+        let out = Command::new(bin)
+            .args([
+                "render",
+                "--procedural",
+                "--demo",
+                "--uv-size",
+                "256",
+                "--device",
+                device,
+            ])
+            .arg("--out")
+            .arg(scratch.join(format!("render-{device}.png")))
+            .env("XDG_RUNTIME_DIR", runtime_dir())
+            .output()?;
+        if !out.status.success() {
+            bail!(
+                "bitt render --demo on {device} failed ({}):\n{}",
+                out.status,
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+    }
+    let out = Command::new(bin)
+        .arg("image-diff")
+        .arg(scratch.join("render-flex.png"))
+        .arg(scratch.join("render-wgpu.png"))
+        .output()?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    if !out.status.success() {
+        bail!(
+            "bitt image-diff failed ({}): {}",
+            out.status,
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let v: serde_json::Value =
+        serde_json::from_str(text.trim()).with_context(|| format!("image-diff printed {text}"))?;
+    let mean = v["mean_abs_diff"]
+        .as_f64()
+        .context("image-diff: no mean_abs_diff")?;
+    if v["mean_a"].as_f64().unwrap_or(0.0) < 0.01 {
+        bail!("bitt render --demo drew an (almost) black image: {text}");
+    }
+    Ok(mean)
 }
 
 fn fuzz(args: &[String]) -> Result<()> {
@@ -256,12 +320,12 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some((cmd, rest)) = args.split_first() else {
         bail!(
-            "usage: cargo xtask <demo|test|e2e|pose-hands|convert-mano|texture|convert-html|fuzz> [ARGS]"
+            "usage: cargo xtask <demo|test|e2e|pose-hands|convert-mano|texture|convert-html|render|fuzz|bench> [ARGS]"
         );
     };
     match cmd.as_str() {
         "demo" => bitt(&[&["demo".to_string()], rest].concat()),
-        "pose-hands" | "convert-mano" | "texture" | "convert-html" => bitt(&args),
+        "pose-hands" | "convert-mano" | "texture" | "convert-html" | "render" => bitt(&args),
         "test" => {
             let status = cargo()
                 .args(["test", "--workspace", "--release"])
@@ -278,6 +342,8 @@ fn main() -> Result<()> {
         }
         "e2e" => e2e(),
         "fuzz" => fuzz(rest),
+        "nets" => nets::nets(rest),
+        "bench" => bench::bench(rest),
         other => {
             bail!("unknown command `{other}`; try demo, test, e2e, pose-hands, convert-mano, fuzz")
         }

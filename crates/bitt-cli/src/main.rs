@@ -4,9 +4,12 @@
 //! everything else lives in the library crates (see ARCHITECTURE.md).
 
 mod backend_check;
+mod bench_render;
 mod demo;
 mod device;
+mod nets;
 mod pose_hands;
+mod render;
 mod texture;
 
 use std::path::PathBuf;
@@ -49,6 +52,23 @@ enum Command {
     },
     /// Run the built-in demo scene (procedural hands; no licensed files needed).
     Demo(demo::DemoArgs),
+    /// Print the four networks' parameter counts and output shapes at a preset (JSON).
+    Nets(nets::NetsArgs),
+    /// Time forward + backward of BTR or the albedo U-Net (JSON; `cargo xtask bench`).
+    BenchNets(nets::BenchNetsArgs),
+    /// Render both hands of a scene with a UV texture under a point light; optionally unwrap
+    /// an image onto their texels (visible texels, masks, Table-3 statistics).
+    Render(render::RenderArgs),
+    /// Time the renderer's stages forward and backward (JSON; `cargo xtask bench render`).
+    BenchRender(bench_render::BenchRenderArgs),
+    /// Mean and largest absolute difference of two images (JSON; `cargo xtask e2e`).
+    #[command(hide = true)]
+    ImageDiff {
+        /// First image.
+        a: PathBuf,
+        /// Second image.
+        b: PathBuf,
+    },
     /// Run a small fixed computation (conv, matmul, autodiff) on one backend and print the
     /// numbers, for comparing backends (`cargo xtask e2e`).
     BackendCheck {
@@ -67,5 +87,10 @@ fn main() -> Result<()> {
         Command::Texture(args) => texture::run(&args),
         Command::ConvertHtml { model_dir, out } => texture::convert(&model_dir, &out),
         Command::BackendCheck { device } => backend_check::run(device),
+        Command::Render(args) => render::run(&args),
+        Command::BenchRender(args) => bench_render::run(&args),
+        Command::ImageDiff { a, b } => render::image_diff(&a, &b),
+        Command::Nets(args) => nets::run(&args),
+        Command::BenchNets(args) => nets::bench(&args),
     }
 }

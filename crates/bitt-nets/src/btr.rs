@@ -1,0 +1,476 @@
+//! BTR, the bi-directional texture reconstructor (paper Sec. 3.3 "Fine Stage", eq. 3-5;
+//! supplement D "Bi-directional Texture Reconstructor").
+//!
+//! BTR works on texel vectors: a hand's texture as the compact vector of its UV layout's
+//! valid texels, `[B, 3, T]` (`T = 206,330` for HTML's 1024x1024 layout). For each hand the
+//! input is the composed vector `t_i = T(h_i)(1 - v_i) + u_i` ([`compose_texels`]): the
+//! coarse HTML texture where the hand is not visible, the unwrapped albedo where it is.
+//!
+//! Architecture (one set of weights for both hands):
+//!
+//! - stem: a 1-D ResNet block `3 -> c0`;
+//! - encoder: per level `l` two ResNet blocks `c_l -> c_{l+1} -> c_{l+1}` then max-pool /2
+//!   (`T -> floor(T / 2)`); the pooled features `e^l` are the skips;
+//! - middle: two ResNet blocks at the deepest width;
+//! - bi-directional decoder (eq. 4-5): level `i` concatenates `[own previous features,
+//!   the other hand's previous features, own skip]` (`3 c_{l+1}` channels), a ResNet block
+//!   to `c_l`, nearest x2 upsampling (plus one copy of the last texel when the encoder's
+//!   length at that level was odd, so `T` comes back exactly) and a second ResNet block;
+//! - head: 1x1 convolutions `c0 -> 8 -> 3` and a sigmoid.
+//!
+//! A ResNet block is `SiLU(GN(conv3(SiLU(GN(conv3(x)))))) + skip(x)`, with group norm over 8
+//! groups and a 1x1 convolution as `skip` when the width changes.
+//!
+//! Both hands run as one batch of `2B` (left then right): group norm is per sample, so this
+//! is exactly the per-hand computation, and "the other hand" is the other half of the batch.
+//! With `bidirectional = false` (the paper's ablation, Table 4) the other hand's features
+//! are replaced by zeros; the layers and the parameter count stay the same.
+
+use burn::config::Config;
+use burn::module::Module;
+use burn::nn::{GroupNorm, GroupNormConfig};
+use burn::tensor::activation::{sigmoid, silu};
+use burn::tensor::module::max_pool1d;
+use burn::tensor::ops::MaxPoolOptions;
+use burn::tensor::{Device, Tensor};
+
+use crate::NetsError;
+use crate::conv1d::{ConvImpl, TexelConv, TexelConvConfig};
+
+/// Configuration of [`Btr`].
+#[derive(Config, Debug)]
+pub struct BtrConfig {
+    /// Channels of the input texel vectors (RGB).
+    #[config(default = 3)]
+    pub channels_in: usize,
+    /// Channels of the output texel vectors (RGB).
+    #[config(default = 3)]
+    pub channels_out: usize,
+    /// Widths `c0, c1, ...`: the stem's output and each encoder level's output; one
+    /// downsampling per step. Supplement D: 16, 64, 128, 256.
+    #[config(default = "vec![16, 64, 128, 256]")]
+    pub channels: Vec<usize>,
+    /// Groups of every group norm (the reference's ResNet blocks use 8).
+    #[config(default = 8)]
+    pub groups: usize,
+    /// Width of the hidden 1x1 convolution of the head (the reference uses 8).
+    #[config(default = 8)]
+    pub head_channels: usize,
+    /// `true`: the decoder sees the other hand's features (eq. 4-5). `false`: zeros instead
+    /// (the "w/o bi-directional" ablation, paper Sec. 4.3), same parameters.
+    #[config(default = true)]
+    pub bidirectional: bool,
+    /// How the 1-D convolutions are evaluated (same function, different speed).
+    #[config(default = "ConvImpl::ShiftedSum")]
+    pub conv: ConvImpl,
+}
+
+/// One 1-D ResNet block: two (conv k=3, group norm, SiLU) and a residual connection.
+#[derive(Module, Debug)]
+pub struct ResBlock1d {
+    conv1: TexelConv,
+    norm1: GroupNorm,
+    conv2: TexelConv,
+    norm2: GroupNorm,
+    /// 1x1 convolution on the residual path when the width changes.
+    skip: Option<TexelConv>,
+}
+
+impl ResBlock1d {
+    fn new(c_in: usize, c_out: usize, groups: usize, conv: ConvImpl, device: &Device) -> Self {
+        let conv3 = |a, b| {
+            TexelConvConfig::new(a, b, 3)
+                .with_implementation(conv)
+                .init(device)
+        };
+        let norm = || GroupNormConfig::new(groups, c_out).init(device);
+        ResBlock1d {
+            conv1: conv3(c_in, c_out),
+            norm1: norm(),
+            conv2: conv3(c_out, c_out),
+            norm2: norm(),
+            skip: (c_in != c_out).then(|| {
+                TexelConvConfig::new(c_in, c_out, 1)
+                    .with_implementation(conv)
+                    .init(device)
+            }),
+        }
+    }
+
+    /// # Shapes
+    /// - `x`: `[N, C_in, L]`
+    /// - output: `[N, C_out, L]`
+    pub fn forward(&self, x: Tensor<3>) -> Tensor<3> {
+        let h = conv_norm_silu(&self.conv1, &self.norm1, x.clone());
+        let h = conv_norm_silu(&self.conv2, &self.norm2, h);
+        let residual = match &self.skip {
+            Some(conv) => conv.forward(x),
+            None => x,
+        };
+        h + residual
+    }
+}
+
+/// `SiLU(GroupNorm(conv(x)))`, the block of a ResNet block.
+///
+/// Computes exactly `silu(norm.forward(conv.forward(x)))` (up to rounding) with fewer passes
+/// over the `[N, C, L]` activations: the convolution's bias is folded into the
+/// normalisation (its effect on the group statistics follows from the per-channel moments
+/// `E[z]`, `E[z^2]` of the bias-free output `z`), and the normalisation becomes one
+/// per-channel affine map `z scale + shift`. The variance is `E[y^2] - E[y]^2` (clamped at
+/// zero), computed in `f32` like the rest.
+fn conv_norm_silu(conv: &TexelConv, norm: &GroupNorm, x: Tensor<3>) -> Tensor<3> {
+    let z = conv.forward_without_bias(x);
+    let [n, c, _] = z.dims();
+    let (g, eps) = (norm.num_groups, norm.epsilon);
+    let cg = c / g;
+    let b = conv.bias.val().reshape([1, c, 1]);
+    // Per-channel moments of y = z + b over the texel axis.
+    let z1 = z.clone().mean_dim(2);
+    let z2 = z.clone().square().mean_dim(2);
+    let y1 = z1.clone() + b.clone();
+    let y2 = z2 + (z1 * b.clone()).mul_scalar(2.0) + b.clone().square();
+    // Group moments (every channel of a group has the same number of texels).
+    let mean = y1.reshape([n, g, cg]).mean_dim(2);
+    let var = (y2.reshape([n, g, cg]).mean_dim(2) - mean.clone().square()).clamp_min(0.0);
+    let rstd = var.add_scalar(eps).sqrt().recip();
+    let per_channel = |t: Tensor<3>| t.expand([n, g, cg]).reshape([n, c, 1]);
+    let mut scale = per_channel(rstd);
+    let mut shift = (b - per_channel(mean)) * scale.clone();
+    if let (Some(gamma), Some(beta)) = (&norm.gamma, &norm.beta) {
+        let gamma = gamma.val().reshape([1, c, 1]);
+        shift = shift * gamma.clone() + beta.val().reshape([1, c, 1]);
+        scale = scale * gamma;
+    }
+    silu(z * scale + shift)
+}
+
+/// Two ResNet blocks of one encoder or decoder level.
+#[derive(Module, Debug)]
+pub struct BtrLevel {
+    block1: ResBlock1d,
+    block2: ResBlock1d,
+}
+
+/// The bi-directional texture reconstructor, see the module docs.
+#[derive(Module, Debug)]
+pub struct Btr {
+    stem: ResBlock1d,
+    encoder: Vec<BtrLevel>,
+    middle: Vec<ResBlock1d>,
+    decoder: Vec<BtrLevel>,
+    head1: TexelConv,
+    head2: TexelConv,
+    #[module(skip)]
+    bidirectional: bool,
+}
+
+/// BTR's output: the full texel vectors of both hands, values in `(0, 1)`.
+#[derive(Debug, Clone)]
+pub struct BtrOutput {
+    /// `[B, 3, T]`.
+    pub left: Tensor<3>,
+    /// `[B, 3, T]`.
+    pub right: Tensor<3>,
+}
+
+impl BtrConfig {
+    /// Checks the widths (each a multiple of `groups`, at least one level).
+    pub fn validate(&self) -> Result<(), NetsError> {
+        if self.channels.len() < 2 {
+            return Err(NetsError::Invalid(format!(
+                "BTR needs at least two widths (one level), got {:?}",
+                self.channels
+            )));
+        }
+        if self.groups == 0
+            || self.head_channels == 0
+            || self.channels_in == 0
+            || self.channels_out == 0
+            || self
+                .channels
+                .iter()
+                .any(|&c| c == 0 || !c.is_multiple_of(self.groups))
+        {
+            return Err(NetsError::Invalid(format!(
+                "BTR widths {:?} must be non-zero multiples of the {} groups",
+                self.channels, self.groups
+            )));
+        }
+        Ok(())
+    }
+
+    /// The smallest texel count the network accepts: every level keeps at least one texel.
+    pub fn min_texels(&self) -> usize {
+        1 << (self.channels.len() - 1)
+    }
+
+    /// Creates the network.
+    ///
+    /// # Panics
+    /// When [`BtrConfig::validate`] fails.
+    pub fn init(&self, device: &Device) -> Btr {
+        if let Err(e) = self.validate() {
+            panic!("{e}");
+        }
+        let (g, conv) = (self.groups, self.conv);
+        let ch = &self.channels;
+        let block = |a, b| ResBlock1d::new(a, b, g, conv, device);
+        let deepest = ch[ch.len() - 1];
+        let head = |a, b| {
+            TexelConvConfig::new(a, b, 1)
+                .with_implementation(conv)
+                .init(device)
+        };
+        Btr {
+            stem: block(self.channels_in, ch[0]),
+            encoder: ch
+                .windows(2)
+                .map(|w| BtrLevel {
+                    block1: block(w[0], w[1]),
+                    block2: block(w[1], w[1]),
+                })
+                .collect(),
+            middle: vec![block(deepest, deepest), block(deepest, deepest)],
+            decoder: ch
+                .windows(2)
+                .rev()
+                .map(|w| BtrLevel {
+                    block1: block(3 * w[1], w[0]),
+                    block2: block(w[0], w[0]),
+                })
+                .collect(),
+            head1: head(ch[0], self.head_channels),
+            head2: head(self.head_channels, self.channels_out),
+            bidirectional: self.bidirectional,
+        }
+    }
+}
+
+/// Nearest-neighbour x2 upsampling along the last axis: `[N, C, L] -> [N, C, 2L]`.
+fn upsample2(x: Tensor<3>) -> Tensor<3> {
+    let [n, c, l] = x.dims();
+    x.unsqueeze_dim::<4>(3)
+        .expand([n, c, l, 2])
+        .reshape([n, c, 2 * l])
+}
+
+/// The other hand's features: the two halves of the batch swapped.
+fn swap_hands(x: Tensor<3>) -> Tensor<3> {
+    let b = x.dims()[0] / 2;
+    Tensor::cat(vec![x.clone().narrow(0, b, b), x.narrow(0, 0, b)], 0)
+}
+
+impl Btr {
+    /// Whether the decoder mixes the hands (eq. 4-5) or sees zeros (ablation).
+    pub fn bidirectional(&self) -> bool {
+        self.bidirectional
+    }
+
+    /// Reconstructs both hands' full texel vectors.
+    ///
+    /// # Shapes
+    /// - `left`, `right`: `[B, C_in, T]` composed texel vectors ([`compose_texels`]),
+    ///   `T >= 2^levels` (8 for the paper's widths), any parity
+    /// - output: [`BtrOutput`] with `left`, `right`: `[B, C_out, T]`, in `(0, 1)`
+    ///
+    /// # Panics
+    /// When the two inputs differ in shape, have the wrong channel count or `T` is too short.
+    pub fn forward(&self, left: Tensor<3>, right: Tensor<3>) -> BtrOutput {
+        let dims = left.dims();
+        assert_eq!(dims, right.dims(), "BTR: left and right shapes differ");
+        let [b, _, t] = dims;
+        let levels = self.encoder.len();
+        assert!(
+            t >= 1 << levels,
+            "BTR: {t} texels is too short for {levels} levels"
+        );
+        let mut h = self.stem.forward(Tensor::cat(vec![left, right], 0));
+        let mut lengths = Vec::with_capacity(levels);
+        let mut skips = Vec::with_capacity(levels);
+        for level in &self.encoder {
+            h = level.block2.forward(level.block1.forward(h));
+            lengths.push(h.dims()[2]);
+            h = max_pool1d(h, MaxPoolOptions::new([2]).with_stride([2]));
+            skips.push(h.clone());
+        }
+        for block in &self.middle {
+            h = block.forward(h);
+        }
+        for level in &self.decoder {
+            let other = if self.bidirectional {
+                swap_hands(h.clone())
+            } else {
+                h.zeros_like()
+            };
+            let skip = skips.pop().expect("one skip per level");
+            h = level.block1.forward(Tensor::cat(vec![h, other, skip], 1));
+            h = upsample2(h);
+            let target = lengths.pop().expect("one length per level");
+            let len = h.dims()[2];
+            if len < target {
+                let last = h.clone().narrow(2, len - 1, 1);
+                h = Tensor::cat(vec![h, last], 2);
+            }
+            h = level.block2.forward(h);
+        }
+        let out = sigmoid(self.head2.forward(self.head1.forward(h)));
+        BtrOutput {
+            left: out.clone().narrow(0, 0, b),
+            right: out.narrow(0, b, b),
+        }
+    }
+}
+
+/// The BTR input of one hand (eq. 3): the coarse texture where the hand is not visible, the
+/// unwrapped albedo where it is, `coarse (1 - visible) + unwrapped visible`.
+///
+/// This equals the paper's `T(h)(1 - v) + u` when `u` is zero outside the visible mask, as
+/// an unwrapped texture is; multiplying by the mask makes it hold for any `unwrapped`.
+///
+/// # Shapes
+/// - `coarse`, `unwrapped`: `[B, 3, T]`; `visible`: `[B, 1, T]` or `[B, 3, T]` in `[0, 1]`
+/// - output: `[B, 3, T]`
+pub fn compose_texels(coarse: Tensor<3>, unwrapped: Tensor<3>, visible: Tensor<3>) -> Tensor<3> {
+    let hidden = visible.clone().neg().add_scalar(1.0);
+    coarse * hidden + unwrapped * visible
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::test_util::{assert_close, devices, random, to_vec};
+
+    fn tiny(bidirectional: bool) -> BtrConfig {
+        BtrConfig::new()
+            .with_channels(vec![8, 16, 16, 24])
+            .with_bidirectional(bidirectional)
+    }
+
+    #[test]
+    fn btr_shapes_any_parity() {
+        for (name, device) in devices() {
+            let net = tiny(true).init(&device);
+            for t in [8, 9, 37, 64, 101] {
+                let out = net.forward(random([2, 3, t], 1, &device), random([2, 3, t], 2, &device));
+                assert_eq!(out.left.dims(), [2, 3, t], "{name} T={t}");
+                assert_eq!(out.right.dims(), [2, 3, t], "{name} T={t}");
+                let v = to_vec(out.left);
+                assert!(
+                    v.iter().all(|x| *x > 0.0 && *x < 1.0),
+                    "{name}: sigmoid range"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn decoder_mixes_hands_only_when_bidirectional() {
+        for (name, device) in devices() {
+            for bidirectional in [true, false] {
+                let net = tiny(bidirectional).init(&device);
+                let left = random([1, 3, 45], 5, &device);
+                let a = net.forward(left.clone(), random([1, 3, 45], 6, &device));
+                let b = net.forward(left, random([1, 3, 45], 7, &device));
+                let (la, lb) = (to_vec(a.left), to_vec(b.left));
+                let diff = la
+                    .iter()
+                    .zip(&lb)
+                    .map(|(x, y)| (x - y).abs())
+                    .fold(0.0, f32::max);
+                if bidirectional {
+                    assert!(diff > 1e-5, "{name}: left output ignores the right hand");
+                } else {
+                    assert_eq!(diff, 0.0, "{name}: ablation leaks the right hand");
+                }
+                // The right output always depends on the right input.
+                assert_ne!(to_vec(a.right), to_vec(b.right), "{name}");
+            }
+        }
+    }
+
+    #[test]
+    fn ablation_has_the_same_parameters() {
+        let device = Device::flex();
+        assert_eq!(
+            tiny(true).init(&device).num_params(),
+            tiny(false).init(&device).num_params()
+        );
+    }
+
+    /// The hands are processed as one batch; that must equal running each hand on its own
+    /// (swapping the inputs swaps the outputs).
+    #[test]
+    fn hands_are_symmetric() {
+        for (name, device) in devices() {
+            let net = tiny(true).init(&device);
+            let (l, r) = (
+                random([1, 3, 21], 8, &device),
+                random([1, 3, 21], 9, &device),
+            );
+            let a = net.forward(l.clone(), r.clone());
+            let b = net.forward(r, l);
+            assert_close(&to_vec(a.left), &to_vec(b.right), 1e-5, name);
+            assert_close(&to_vec(a.right), &to_vec(b.left), 1e-5, name);
+        }
+    }
+
+    /// The folded conv + group norm + SiLU equals the plain composition, values and
+    /// gradients.
+    #[test]
+    fn folded_norm_matches_burn_group_norm() {
+        use burn::module::Param;
+        for (name, device) in devices() {
+            let ad = device.clone().autodiff();
+            let conv = TexelConvConfig::new(4, 16, 3).init(&ad);
+            let mut norm = GroupNormConfig::new(8, 16).init(&ad);
+            norm.gamma = Some(Param::from_tensor(random([16], 11, &ad).add_scalar(1.0)));
+            norm.beta = Some(Param::from_tensor(random([16], 12, &ad)));
+            // An offset input makes the bias and the mean matter.
+            let x = random([2, 4, 19], 13, &ad).add_scalar(0.7).require_grad();
+            let w = random([2, 16, 19], 14, &ad);
+            let mut results = Vec::new();
+            for folded in [false, true] {
+                let y = if folded {
+                    conv_norm_silu(&conv, &norm, x.clone())
+                } else {
+                    silu(norm.forward(conv.forward(x.clone())))
+                };
+                let grads = (y.clone() * w.clone()).sum().backward();
+                let gamma = norm.gamma.as_ref().unwrap();
+                results.push([
+                    to_vec(y.inner()),
+                    to_vec(x.grad(&grads).unwrap()),
+                    to_vec(conv.weight.grad(&grads).unwrap()),
+                    to_vec(conv.bias.grad(&grads).unwrap()),
+                    to_vec(gamma.grad(&grads).unwrap()),
+                ]);
+            }
+            for (a, b) in results[1].iter().zip(&results[0]) {
+                assert_close(a, b, 2e-4, name);
+            }
+        }
+    }
+
+    #[test]
+    fn compose_uses_coarse_where_hidden() {
+        let device = Device::flex();
+        let coarse = Tensor::<3>::from_floats([[[0.5, 0.5, 0.5]]], &device);
+        let unwrapped = Tensor::<3>::from_floats([[[0.9, 0.0, 0.2]]], &device);
+        let visible = Tensor::<3>::from_floats([[[1.0, 0.0, 0.5]]], &device);
+        let t = to_vec(compose_texels(coarse, unwrapped, visible));
+        assert_close(&t, &[0.9, 0.5, 0.35], 1e-6, "compose");
+    }
+
+    #[test]
+    fn rejects_widths_not_divisible_by_groups() {
+        assert!(
+            BtrConfig::new()
+                .with_channels(vec![12, 16])
+                .validate()
+                .is_err()
+        );
+        assert!(BtrConfig::new().with_channels(vec![16]).validate().is_err());
+        assert!(BtrConfig::new().validate().is_ok());
+    }
+}

@@ -1,0 +1,125 @@
+//! The convolutional image encoder shared by the light network (Sec. 3.1) and the HTML
+//! network (Sec. 3.2); supplement D, "Light Network" and "HTML Network".
+//!
+//! `log2(S) - 1` convolutions (kernel 4, stride 2, no bias, ReLU) halve an `S x S` image
+//! down to `4 x 4`, the last one (no padding) to `1 x 1`; widths double from
+//! `base_channels` up to `8 base_channels`. A 1x1 convolution (no bias) and tanh give the
+//! output vector.
+
+use burn::config::Config;
+use burn::module::Module;
+use burn::nn::PaddingConfig2d;
+use burn::nn::conv::{Conv2d, Conv2dConfig};
+use burn::tensor::activation::relu;
+use burn::tensor::{Device, Tensor};
+
+use crate::NetsError;
+
+/// Configuration of a [`ConvEncoder`].
+#[derive(Config, Debug)]
+pub struct ConvEncoderConfig {
+    /// Channels of the input image (RGB).
+    #[config(default = 3)]
+    pub channels_in: usize,
+    /// Length of the output vector.
+    pub channels_out: usize,
+    /// Side of the square input image; a power of two, at least 4.
+    pub image_size: usize,
+    /// Width of the first convolution; later ones double it up to 8 times this.
+    pub base_channels: usize,
+}
+
+/// The encoder, see the module docs.
+#[derive(Module, Debug)]
+pub struct ConvEncoder {
+    layers: Vec<Conv2d>,
+    out: Conv2d,
+}
+
+impl ConvEncoderConfig {
+    /// Checks that the image side is a power of two (at least 4) and the widths non-zero.
+    pub fn validate(&self) -> Result<(), NetsError> {
+        if !self.image_size.is_power_of_two() || self.image_size < 4 {
+            return Err(NetsError::Invalid(format!(
+                "encoder image size {} must be a power of two >= 4",
+                self.image_size
+            )));
+        }
+        if self.channels_in == 0 || self.channels_out == 0 || self.base_channels == 0 {
+            return Err(NetsError::Invalid(format!(
+                "encoder widths must be non-zero: {self:?}"
+            )));
+        }
+        Ok(())
+    }
+
+    /// The widths after each strided convolution.
+    pub fn widths(&self) -> Vec<usize> {
+        let layers = self.image_size.trailing_zeros() as usize - 1;
+        (0..layers)
+            .map(|i| (self.base_channels << i).min(8 * self.base_channels))
+            .collect()
+    }
+
+    /// Creates the encoder.
+    ///
+    /// # Panics
+    /// When [`ConvEncoderConfig::validate`] fails.
+    pub fn init(&self, device: &Device) -> ConvEncoder {
+        if let Err(e) = self.validate() {
+            panic!("{e}");
+        }
+        let widths = self.widths();
+        let mut layers = Vec::with_capacity(widths.len());
+        let mut c_in = self.channels_in;
+        for (i, &c_out) in widths.iter().enumerate() {
+            let pad = if i + 1 == widths.len() { 0 } else { 1 };
+            layers.push(
+                Conv2dConfig::new([c_in, c_out], [4, 4])
+                    .with_stride([2, 2])
+                    .with_padding(PaddingConfig2d::Explicit(pad, pad, pad, pad))
+                    .with_bias(false)
+                    .init(device),
+            );
+            c_in = c_out;
+        }
+        ConvEncoder {
+            layers,
+            out: Conv2dConfig::new([c_in, self.channels_out], [1, 1])
+                .with_bias(false)
+                .init(device),
+        }
+    }
+}
+
+impl ConvEncoder {
+    /// Encodes images into vectors in `(-1, 1)`.
+    ///
+    /// # Shapes
+    /// - `image`: `[B, C_in, S, S]` with `S` the configured `image_size`
+    /// - output: `[B, C_out]`
+    pub fn forward(&self, image: Tensor<4>) -> Tensor<2> {
+        let b = image.dims()[0];
+        let mut x = image;
+        for layer in &self.layers {
+            x = relu(layer.forward(x));
+        }
+        let x = self.out.forward(x);
+        let c = x.dims()[1];
+        x.reshape([b, c]).tanh()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn widths_follow_the_image_size() {
+        let c = ConvEncoderConfig::new(12, 256, 32);
+        assert_eq!(c.widths(), [32, 64, 128, 256, 256, 256, 256]);
+        assert_eq!(ConvEncoderConfig::new(1, 8, 2).widths(), [2, 4]);
+        assert!(ConvEncoderConfig::new(1, 100, 2).validate().is_err());
+        assert!(ConvEncoderConfig::new(1, 2, 2).validate().is_err());
+    }
+}
