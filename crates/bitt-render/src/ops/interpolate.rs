@@ -25,11 +25,19 @@ pub fn interpolate(attributes: Tensor<2>, raster: &Raster) -> Result<Tensor<2>, 
     if n == 0 {
         return Ok(Tensor::zeros([0, a], &attributes.device()));
     }
-    let corner_values = attributes
-        .select(0, raster.corners.clone())
-        .reshape([n, 3, a]);
+    Ok(blend(attributes, raster.corners.clone(), raster))
+}
+
+/// Gathers the corner rows `corners [3 N]` and blends them with the raster's barycentrics.
+fn blend(
+    attributes: Tensor<2>,
+    corners: Tensor<1, burn::tensor::Int>,
+    raster: &Raster,
+) -> Tensor<2> {
+    let (n, a) = (raster.num_covered(), attributes.dims()[1]);
+    let corner_values = attributes.select(0, corners).reshape([n, 3, a]);
     let weights = raster.bary.clone().reshape([n, 3, 1]);
-    Ok((corner_values * weights).sum_dim(1).reshape([n, a]))
+    (corner_values * weights).sum_dim(1).reshape([n, a])
 }
 
 /// Interpolates attributes indexed by their own faces (nvdiffrast's `tri` argument), e.g.
@@ -63,9 +71,9 @@ pub fn interpolate_with_faces(
     if n == 0 {
         return Ok(Tensor::zeros([0, a], &device));
     }
-    let corner_values = attributes
-        .select(0, super::index_tensor(corners, &device))
-        .reshape([n, 3, a]);
-    let weights = raster.bary.clone().reshape([n, 3, 1]);
-    Ok((corner_values * weights).sum_dim(1).reshape([n, a]))
+    Ok(blend(
+        attributes,
+        super::index_tensor(corners, &device),
+        raster,
+    ))
 }

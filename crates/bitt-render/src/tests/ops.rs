@@ -3,23 +3,8 @@
 
 use burn::tensor::{Device, Tensor, TensorData};
 
-use super::{Camera, Rng};
+use super::{Camera, Rng, devices, to_vec};
 use crate::{Raster, Topology, antialias, cpu, interpolate, rasterize, texture};
-
-#[allow(deprecated)] // burn-ndarray is deprecated upstream but still a supported backend here
-fn devices() -> Vec<(&'static str, Device)> {
-    vec![
-        ("flex", Device::flex().autodiff()),
-        ("ndarray", Device::ndarray().autodiff()),
-    ]
-}
-
-fn to_vec<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.into_data()
-        .convert::<f32>()
-        .try_into_vec::<f32>()
-        .expect("readback")
-}
 
 fn tensor2(values: &[f32], shape: [usize; 2], device: &Device) -> Tensor<2> {
     Tensor::from_data(TensorData::new(values.to_vec(), shape), device)

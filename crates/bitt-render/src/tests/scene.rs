@@ -8,26 +8,11 @@ use bitt_mesh::{HandModel, OrthographicCamera, PinholeCamera, Side, procedural_p
 use bitt_texture::TextureLayout;
 use burn::tensor::{Device, Tensor, TensorData};
 
-use super::Rng;
+use super::{Rng, devices, to_vec};
 use crate::scene::{
     Camera, DepthRange, LightValues, Material, PointLight, RenderSettings, Scene, TexelSurface,
     TexelVisibilityStats, TexturedMesh, UnwrapSettings, phong, render, unwrap,
 };
-
-#[allow(deprecated)] // burn-ndarray is deprecated upstream but still a supported backend here
-fn devices() -> Vec<(&'static str, Device)> {
-    vec![
-        ("flex", Device::flex().autodiff()),
-        ("ndarray", Device::ndarray().autodiff()),
-    ]
-}
-
-fn to_vec<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.into_data()
-        .convert::<f32>()
-        .try_into_vec::<f32>()
-        .expect("readback")
-}
 
 fn tensor2(values: Vec<f32>, shape: [usize; 2], device: &Device) -> Tensor<2> {
     Tensor::from_data(TensorData::new(values, shape), device)
