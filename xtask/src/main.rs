@@ -8,6 +8,7 @@
 //! - `e2e`: the same computation on every backend (flex, ndarray, wgpu), compared.
 //! - `pose-hands`, `convert-mano`, `texture`, `convert-html`, `render` ARGS: forwarded to
 //!   `bitt`.
+//! - `synth [ARGS]`: synthetic scenes (default: the 24-scene benchmark), forwarded to `bitt`.
 //! - `fuzz [--seconds N]`: fuzz the pickle reader with cargo-fuzz.
 //! - `nets [--preset P]`: the networks' parameter counts and output shapes (JSON).
 //! - `bench btr|albedo|nets [--preset P]`: burn vs PyTorch timings, side by side.
@@ -226,12 +227,88 @@ fn e2e() -> Result<()> {
         failed = true;
         println!("e2e render differs between flex and wgpu");
     }
+    // The trainer end to end: the tiny preset for a few iterations on every backend.
+    let (first_losses, falls) = train_on_backends(&bin, &scratch)?;
+    let (f0, rest) = first_losses.split_first().context("no training run")?;
+    for (device, loss) in rest {
+        let rel = (loss - f0.1).abs() / f0.1.abs().max(1e-12);
+        println!(
+            "e2e train-scene --preset tiny: first loss {device} {loss:.6} vs {} {:.6} (relative {rel:.1e})",
+            f0.0, f0.1
+        );
+        if rel > TRAIN_LOSS_TOLERANCE {
+            failed = true;
+            println!(
+                "e2e train-scene: {device} disagrees with {} beyond {TRAIN_LOSS_TOLERANCE:e}",
+                f0.0
+            );
+        }
+    }
+    for (device, first, last) in &falls {
+        if last >= first {
+            failed = true;
+            println!("e2e train-scene: loss did not fall on {device}: {first:.6} -> {last:.6}");
+        }
+    }
     let _ = std::fs::remove_dir_all(&scratch);
     if failed {
         bail!("backends disagree");
     }
-    println!("e2e: 5 passed, 0 failed");
+    println!("e2e: 6 passed, 0 failed");
     Ok(())
+}
+
+/// Relative difference allowed between backends' first training losses: the same weights
+/// and inputs, different float kernels (summation order, fused multiply-adds).
+const TRAIN_LOSS_TOLERANCE: f64 = 1e-3;
+
+/// Trains the tiny preset for 4 iterations on flex, ndarray and wgpu; returns each backend's
+/// first loss and (first, last) losses.
+#[allow(clippy::type_complexity)]
+fn train_on_backends(
+    bin: &Path,
+    scratch: &Path,
+) -> Result<(Vec<(&'static str, f64)>, Vec<(&'static str, f64, f64)>)> {
+    let mut first = Vec::new();
+    let mut falls = Vec::new();
+    for device in ["flex", "ndarray", "wgpu"] {
+        let out_dir = scratch.join(format!("train-{device}"));
+        let out = Command::new(bin)
+            .args([
+                "train-scene",
+                "--preset",
+                "tiny",
+                "--iterations",
+                "4",
+                "--turntable",
+                "2",
+            ])
+            .args(["--device", device])
+            .arg("--out")
+            .arg(&out_dir)
+            .arg("--cache")
+            .arg(scratch.join("cache"))
+            .env("XDG_RUNTIME_DIR", runtime_dir())
+            .output()?;
+        if !out.status.success() {
+            bail!(
+                "bitt train-scene on {device} failed ({}):\n{}",
+                out.status,
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        let path = out_dir.join("metrics.json");
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("{} missing", path.display()))?;
+        let v: serde_json::Value = serde_json::from_str(&text)?;
+        let total = |i: usize| v["history"][i]["total"].as_f64();
+        let (Some(a), Some(b)) = (total(0), total(3)) else {
+            bail!("{}: no loss history", path.display());
+        };
+        first.push((device, a));
+        falls.push((device, a, b));
+    }
+    Ok((first, falls))
 }
 
 /// Renders the demo scene with `bitt render` on flex and on wgpu; returns the mean absolute
@@ -320,12 +397,13 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some((cmd, rest)) = args.split_first() else {
         bail!(
-            "usage: cargo xtask <demo|test|e2e|pose-hands|convert-mano|texture|convert-html|render|fuzz|bench> [ARGS]"
+            "usage: cargo xtask <demo|test|e2e|train-scene|pose-hands|convert-mano|texture|convert-html|render|synth|fuzz|bench> [ARGS]"
         );
     };
     match cmd.as_str() {
         "demo" => bitt(&[&["demo".to_string()], rest].concat()),
-        "pose-hands" | "convert-mano" | "texture" | "convert-html" | "render" => bitt(&args),
+        "pose-hands" | "convert-mano" | "texture" | "convert-html" | "render" | "train-scene"
+        | "synth" => bitt(&args),
         "test" => {
             let status = cargo()
                 .args(["test", "--workspace", "--release"])

@@ -10,7 +10,9 @@ mod device;
 mod nets;
 mod pose_hands;
 mod render;
+mod synth;
 mod texture;
+mod train_scene;
 
 use std::path::PathBuf;
 
@@ -59,6 +61,12 @@ enum Command {
     /// Render both hands of a scene with a UV texture under a point light; optionally unwrap
     /// an image onto their texels (visible texels, masks, Table-3 statistics).
     Render(render::RenderArgs),
+    /// Write synthetic two-hand scenes (default: the 24-scene benchmark) with ground truth,
+    /// their Table-3 statistics (`stats.json`) and a contact sheet.
+    Synth(synth::SynthArgs),
+    /// Train BiTT on one scene (default: the built-in demo scene) and write the run folder:
+    /// textures, light, renders, avatar.glb, metrics and report.html.
+    TrainScene(train_scene::TrainSceneArgs),
     /// Time the renderer's stages forward and backward (JSON; `cargo xtask bench render`).
     BenchRender(bench_render::BenchRenderArgs),
     /// Mean and largest absolute difference of two images (JSON; `cargo xtask e2e`).
@@ -88,6 +96,8 @@ fn main() -> Result<()> {
         Command::ConvertHtml { model_dir, out } => texture::convert(&model_dir, &out),
         Command::BackendCheck { device } => backend_check::run(device),
         Command::Render(args) => render::run(&args),
+        Command::Synth(args) => synth::run(&args),
+        Command::TrainScene(args) => train_scene::run(&args),
         Command::BenchRender(args) => bench_render::run(&args),
         Command::ImageDiff { a, b } => render::image_diff(&a, &b),
         Command::Nets(args) => nets::run(&args),

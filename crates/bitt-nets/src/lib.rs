@@ -31,7 +31,7 @@ pub use encoder::{ConvEncoder, ConvEncoderConfig};
 pub use error::NetsError;
 pub use html_encoder::{HtmlCoefficients, HtmlEncoder, HtmlEncoderConfig};
 pub use light::{LIGHT_OUTPUTS, LightNet, LightNetConfig, LightParams};
-pub use preset::{BittNets, BittNetsConfig, PAPER_TEXELS, Preset};
+pub use preset::{BittNets, BittNetsConfig, PAPER_TEXELS, Preset, QUICK_TEXELS};
 
 #[cfg(test)]
 pub(crate) mod test_util;

@@ -16,6 +16,10 @@ use crate::light::{LightNet, LightNetConfig};
 /// HTML's compact texel count: valid texels of its 1024 x 1024 UV map (paper Sec. 3.2).
 pub const PAPER_TEXELS: usize = 206_330;
 
+/// Texels of the procedural hand's 256 x 256 UV layout (2-texel gutter), the `quick`
+/// preset's texture.
+pub const QUICK_TEXELS: usize = 28_544;
+
 /// A named configuration of the networks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -92,17 +96,20 @@ impl BittNetsConfig {
                 HtmlEncoderConfig::new(),
                 BtrConfig::new(),
             ),
+            // Sized so that `cargo xtask train-scene` trains in minutes on a 2-core CPU:
+            // the procedural hand's 256 x 256 UV layout (28,544 texels), a quarter of the
+            // paper's albedo widths and half of BTR's.
             Preset::Quick => BittNetsConfig::new(
                 128,
-                40_001,
-                AlbedoNetConfig::new().with_base_channels(32),
+                QUICK_TEXELS,
+                AlbedoNetConfig::new().with_base_channels(16),
                 LightNetConfig::new()
                     .with_image_size(128)
                     .with_base_channels(16),
                 HtmlEncoderConfig::new()
                     .with_image_size(128)
-                    .with_base_channels(32),
-                BtrConfig::new().with_channels(vec![16, 32, 64, 128]),
+                    .with_base_channels(16),
+                BtrConfig::new().with_channels(vec![8, 16, 32, 64]),
             ),
             Preset::Tiny => BittNetsConfig::new(
                 32,

@@ -11,7 +11,9 @@ mod unwrap;
 
 pub use camera::{Camera, DepthRange};
 pub use shading::{LightValues, Material, PointLight, phong, vertex_normals};
-pub use unwrap::{TexelSurface, TexelVisibilityStats, UnwrapSettings, Unwrapped, unwrap};
+pub use unwrap::{
+    TexelSurface, TexelVisibilityStats, UnwrapPlan, UnwrapSettings, Unwrapped, unwrap,
+};
 
 use burn::tensor::Tensor;
 

@@ -161,7 +161,151 @@ pub struct Unwrapped {
     pub visible_host: Vec<bool>,
 }
 
-/// Unwraps `image` onto the texels of one mesh (see the module docs).
+/// Where each texel of one mesh lands in an image and whether it is visible there: the
+/// discrete, geometry-only part of [`unwrap`]. A per-scene trainer plans once (meshes and
+/// camera are fixed) and applies the plan to a new image every iteration.
+#[derive(Debug, Clone)]
+pub struct UnwrapPlan {
+    /// Per texel, the `texture` sample position in the image (`[T, 2]` row-major,
+    /// `align_corners`, `v = 0` at the bottom row).
+    uv: Vec<f32>,
+    /// Per texel, visible in the image.
+    visible: Vec<bool>,
+    /// Image size `[H, W]` the plan was made for.
+    size: [usize; 2],
+}
+
+impl UnwrapPlan {
+    /// Plans the unwrap of one mesh into images of `camera` (see the module docs and
+    /// [`unwrap`]).
+    ///
+    /// # Errors
+    /// A raster of another size than the camera's, wrong vertex counts, non-finite vertices,
+    /// an unusable camera.
+    pub fn new(
+        camera: &Camera,
+        surface: &TexelSurface,
+        vertices: &[DVec3],
+        raster: &Raster,
+        settings: &UnwrapSettings,
+    ) -> Result<Self, RenderError> {
+        camera.validate()?;
+        let (h, w) = (camera.height(), camera.width());
+        if [raster.height(), raster.width()] != [h, w] {
+            return Err(RenderError::TensorShape {
+                what: "raster",
+                expected: format!("{h}x{w} (the camera's size)"),
+                actual: vec![raster.height(), raster.width()],
+            });
+        }
+        let points = surface.points(vertices)?;
+        let normals = surface.normals(vertices)?;
+        let t = points.len();
+        let mut visible = vec![false; t];
+        let mut uv = vec![0.0f32; 2 * t];
+        let frags = &raster.fragments;
+        for k in 0..t {
+            let clip = camera.clip_point(points[k], settings.depth);
+            if clip.w <= 0.0 {
+                continue;
+            }
+            let (x, y, z) = (clip.x / clip.w, clip.y / clip.w, clip.z / clip.w);
+            // Continuous pixel coordinates, pixel centres at c + 1/2.
+            let (px, py) = ((x + 1.0) * w as f64 / 2.0, (y + 1.0) * h as f64 / 2.0);
+            // Sample position for `texture` (align_corners, v = 0 at the bottom row).
+            uv[2 * k] = if w > 1 {
+                ((px - 0.5) / (w - 1) as f64) as f32
+            } else {
+                0.0
+            };
+            uv[2 * k + 1] = if h > 1 {
+                (1.0 - (py - 0.5) / (h - 1) as f64) as f32
+            } else {
+                0.0
+            };
+            if !(0.0..w as f64).contains(&px) || !(0.0..h as f64).contains(&py) {
+                continue;
+            }
+            if normals[k].dot(camera.towards_camera(points[k])) <= 0.0 {
+                continue;
+            }
+            // The bilinear taps around the point must all show this surface: covered, and at
+            // the texel's depth within the tolerance (a nearer surface occludes it; a
+            // background or a farther surface at a tap would bleed into the sample at a
+            // silhouette).
+            let texel_depth = camera.view_depth(z, settings.depth);
+            let (c0, r0) = ((px - 0.5).floor(), (py - 0.5).floor());
+            let taps = [
+                (c0, r0),
+                (c0 + 1.0, r0),
+                (c0, r0 + 1.0),
+                (c0 + 1.0, r0 + 1.0),
+            ];
+            visible[k] = taps.iter().all(|&(col, row)| {
+                let col = col.clamp(0.0, (w - 1) as f64) as usize;
+                let row = row.clamp(0.0, (h - 1) as f64) as usize;
+                let buffer = frags.depth[row * w + col];
+                buffer.is_finite()
+                    && (camera.view_depth(f64::from(buffer), settings.depth) - texel_depth).abs()
+                        <= settings.depth_tolerance
+            });
+        }
+        Ok(Self {
+            uv,
+            visible,
+            size: [h, w],
+        })
+    }
+
+    /// Per texel, visible in the image.
+    pub fn visible(&self) -> &[bool] {
+        &self.visible
+    }
+
+    /// Number of texels `T`.
+    pub fn num_texels(&self) -> usize {
+        self.visible.len()
+    }
+
+    /// Samples `image` at the planned positions: `u` and `v` (differentiable in the image).
+    ///
+    /// # Shapes
+    /// image `[C, H, W]` -> texels `[C, T]`, visible `[1, T]`
+    ///
+    /// # Errors
+    /// An image of another size than the plan's.
+    pub fn apply(&self, image: Tensor<3>) -> Result<Unwrapped, RenderError> {
+        let [c, h, w] = image.dims();
+        crate::ops::check_shape(
+            "image",
+            [c, h, w],
+            [None, Some(self.size[0]), Some(self.size[1])],
+            || {
+                format!(
+                    "[C, {}, {}] (the camera's size)",
+                    self.size[0], self.size[1]
+                )
+            },
+        )?;
+        let t = self.num_texels();
+        let device = image.device();
+        let samples = texture(image, float_tensor(self.uv.clone(), [t, 2], &device))?;
+        let mask: Vec<f32> = self
+            .visible
+            .iter()
+            .map(|&v| if v { 1.0 } else { 0.0 })
+            .collect();
+        let mask = float_tensor(mask, [1, t], &device);
+        Ok(Unwrapped {
+            texels: samples.swap_dims(0, 1) * mask.clone(),
+            visible: mask,
+            visible_host: self.visible.clone(),
+        })
+    }
+}
+
+/// Unwraps `image` onto the texels of one mesh (see the module docs):
+/// [`UnwrapPlan::new`] then [`UnwrapPlan::apply`].
 ///
 /// `raster` is the depth buffer of the whole scene in this camera (e.g.
 /// [`super::SceneRender::raster`] of both hands); `vertices` are this mesh's world vertices.
@@ -194,73 +338,7 @@ pub fn unwrap(
             )
         },
     )?;
-    if [raster.height(), raster.width()] != [h, w] {
-        return Err(RenderError::TensorShape {
-            what: "raster",
-            expected: format!("{h}x{w} (the camera's size)"),
-            actual: vec![raster.height(), raster.width()],
-        });
-    }
-    let points = surface.points(vertices)?;
-    let normals = surface.normals(vertices)?;
-    let t = points.len();
-    let mut visible = vec![false; t];
-    let mut uv = vec![0.0f32; 2 * t];
-    let frags = &raster.fragments;
-    for k in 0..t {
-        let clip = camera.clip_point(points[k], settings.depth);
-        if clip.w <= 0.0 {
-            continue;
-        }
-        let (x, y, z) = (clip.x / clip.w, clip.y / clip.w, clip.z / clip.w);
-        // Continuous pixel coordinates, pixel centres at c + 1/2.
-        let (px, py) = ((x + 1.0) * w as f64 / 2.0, (y + 1.0) * h as f64 / 2.0);
-        // Sample position for `texture` (align_corners, v = 0 at the bottom row).
-        uv[2 * k] = if w > 1 {
-            ((px - 0.5) / (w - 1) as f64) as f32
-        } else {
-            0.0
-        };
-        uv[2 * k + 1] = if h > 1 {
-            (1.0 - (py - 0.5) / (h - 1) as f64) as f32
-        } else {
-            0.0
-        };
-        if !(0.0..w as f64).contains(&px) || !(0.0..h as f64).contains(&py) {
-            continue;
-        }
-        if normals[k].dot(camera.towards_camera(points[k])) <= 0.0 {
-            continue;
-        }
-        // The bilinear taps around the point must all show this surface: covered, and at the
-        // texel's depth within the tolerance (a nearer surface occludes it; a background or a
-        // farther surface at a tap would bleed into the sample at a silhouette).
-        let texel_depth = camera.view_depth(z, settings.depth);
-        let (c0, r0) = ((px - 0.5).floor(), (py - 0.5).floor());
-        let taps = [
-            (c0, r0),
-            (c0 + 1.0, r0),
-            (c0, r0 + 1.0),
-            (c0 + 1.0, r0 + 1.0),
-        ];
-        visible[k] = taps.iter().all(|&(col, row)| {
-            let col = col.clamp(0.0, (w - 1) as f64) as usize;
-            let row = row.clamp(0.0, (h - 1) as f64) as usize;
-            let buffer = frags.depth[row * w + col];
-            buffer.is_finite()
-                && (camera.view_depth(f64::from(buffer), settings.depth) - texel_depth).abs()
-                    <= settings.depth_tolerance
-        });
-    }
-    let device = image.device();
-    let samples = texture(image, float_tensor(uv, [t, 2], &device))?;
-    let mask: Vec<f32> = visible.iter().map(|&v| if v { 1.0 } else { 0.0 }).collect();
-    let mask = float_tensor(mask, [1, t], &device);
-    Ok(Unwrapped {
-        texels: samples.swap_dims(0, 1) * mask.clone(),
-        visible: mask,
-        visible_host: visible,
-    })
+    UnwrapPlan::new(camera, surface, vertices, raster, settings)?.apply(image)
 }
 
 /// Texture-space visibility of a scene (the paper's Table 3) for two meshes sharing one

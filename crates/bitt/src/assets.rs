@@ -1,0 +1,177 @@
+//! What every view of a run shares: the two hand models, their render meshes and the UV
+//! texture layout, and one view's fixed geometry (posed vertices and camera).
+
+use bitt_mesh::glam::DVec3;
+use bitt_mesh::{HandPair, Side, TwoHandScene};
+use bitt_render::scene::{
+    Camera, PointLight, RenderSettings, Scene, SceneRender, TexelSurface, TexturedMesh, render,
+};
+use bitt_texture::{LayoutGather, TextureLayout};
+use burn::tensor::{Device, Tensor, TensorData};
+
+use crate::BittError;
+
+/// Gutter ring (texels) around the UV charts of the texture layouts (as `bitt render`).
+pub const TEXTURE_GUTTER: usize = 2;
+
+/// The hand models and everything derived from their UV layout, shared by every view.
+#[derive(Debug, Clone)]
+pub struct HandAssets {
+    /// Left and right hand models.
+    pub models: HandPair,
+    /// Render meshes, left then right.
+    pub meshes: [TexturedMesh; 2],
+    /// Texture layouts of both hands (same texel order; each with its own texel faces).
+    pub layouts: [TextureLayout; 2],
+    /// Texel surfaces for unwrapping, left then right.
+    pub surfaces: [TexelSurface; 2],
+    /// Both hands as one render scene.
+    pub scene: Scene,
+    /// Side of the square UV textures.
+    pub texture_size: usize,
+}
+
+impl HandAssets {
+    /// Builds the meshes and `texture_size`-square layouts of `models` (both need a UV layout).
+    pub fn new(models: HandPair, texture_size: usize) -> Result<Self, BittError> {
+        let mut meshes = Vec::new();
+        let mut layouts = Vec::new();
+        let mut surfaces = Vec::new();
+        for side in [Side::Left, Side::Right] {
+            let model = models.get(side);
+            let uv = model.uv.as_ref().ok_or_else(|| {
+                BittError::Invalid(format!("the {side} hand model has no UV layout"))
+            })?;
+            let uvs = uv.uvs.iter().map(|p| [p.x as f32, p.y as f32]).collect();
+            meshes.push(TexturedMesh::new(
+                model.faces.clone(),
+                model.num_vertices(),
+                uv.faces.clone(),
+                uvs,
+            )?);
+            let layout = TextureLayout::from_uv(uv, texture_size, texture_size, TEXTURE_GUTTER)?;
+            surfaces.push(TexelSurface::new(
+                &layout,
+                &model.faces,
+                model.num_vertices(),
+            )?);
+            layouts.push(layout);
+        }
+        if layouts[0].num_texels() != layouts[1].num_texels() {
+            return Err(BittError::Invalid(format!(
+                "left and right texture layouts differ ({} vs {} texels)",
+                layouts[0].num_texels(),
+                layouts[1].num_texels()
+            )));
+        }
+        let scene = Scene::new(&[&meshes[0], &meshes[1]])?;
+        Ok(HandAssets {
+            models,
+            meshes: two(meshes),
+            layouts: two(layouts),
+            surfaces: two(surfaces),
+            scene,
+            texture_size,
+        })
+    }
+
+    /// Texels per hand `T`.
+    pub fn num_texels(&self) -> usize {
+        self.layouts[0].num_texels()
+    }
+
+    /// The compact <-> image index tensors on `device`.
+    pub fn gather(&self, device: &Device) -> LayoutGather {
+        self.layouts[0].gather(device)
+    }
+}
+
+/// One view's fixed geometry: both hands posed in the camera frame, and the camera.
+#[derive(Debug, Clone)]
+pub struct ViewGeometry {
+    /// The render camera (camera-frame vertices, so identity extrinsics).
+    pub camera: Camera,
+    /// The scene's camera with its extrinsics (to move lights between views).
+    pub scene_camera: bitt_mesh::PinholeCamera,
+    /// Posed vertices in the camera frame, left then right.
+    pub vertices_host: [Vec<DVec3>; 2],
+    /// The same as `[V, 3]` tensors.
+    pub vertices: [Tensor<2>; 2],
+}
+
+impl ViewGeometry {
+    /// Poses both hands of `scene` (both must be present) on `device`.
+    pub fn new(
+        assets: &HandAssets,
+        scene: &TwoHandScene,
+        device: &Device,
+    ) -> Result<Self, BittError> {
+        let posed = scene.pose_in_camera(&assets.models)?;
+        let mut host = Vec::new();
+        for side in [Side::Left, Side::Right] {
+            let hand = posed.get(side).ok_or_else(|| {
+                BittError::Invalid(format!("the scene has no {side} hand; BiTT needs both"))
+            })?;
+            host.push(hand.vertices.clone());
+        }
+        let host: [Vec<DVec3>; 2] = host.try_into().expect("two hands");
+        let vertices = [
+            vertex_tensor(&host[0], device),
+            vertex_tensor(&host[1], device),
+        ];
+        let c = &scene.camera;
+        let camera = Camera::Pinhole(bitt_mesh::PinholeCamera {
+            rotation: bitt_mesh::glam::DMat3::IDENTITY,
+            translation: DVec3::ZERO,
+            ..*c
+        });
+        Ok(ViewGeometry {
+            camera,
+            scene_camera: *c,
+            vertices_host: host,
+            vertices,
+        })
+    }
+
+    /// Image side lengths `[H, W]`.
+    pub fn size(&self) -> [usize; 2] {
+        [self.camera.height(), self.camera.width()]
+    }
+
+    /// Renders both hands with compact textures `[3, T]` (left, right) under `light`.
+    pub fn render(
+        &self,
+        assets: &HandAssets,
+        gather: &LayoutGather,
+        textures: [Tensor<2>; 2],
+        light: &PointLight,
+        settings: &RenderSettings,
+    ) -> Result<SceneRender, BittError> {
+        let [l, r] = textures;
+        let images = [
+            gather.compact_to_image(l, [0.0; 3]),
+            gather.compact_to_image(r, [0.0; 3]),
+        ];
+        Ok(render(
+            &assets.scene,
+            &self.vertices,
+            &images,
+            &self.camera,
+            light,
+            settings,
+        )?)
+    }
+}
+
+fn two<T: std::fmt::Debug>(v: Vec<T>) -> [T; 2] {
+    v.try_into().expect("two hands")
+}
+
+/// `[V, 3]` `f32` tensor of points.
+pub fn vertex_tensor(vertices: &[DVec3], device: &Device) -> Tensor<2> {
+    let flat: Vec<f32> = vertices
+        .iter()
+        .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+        .collect();
+    Tensor::from_data(TensorData::new(flat, [vertices.len(), 3]), device)
+}

@@ -1,0 +1,230 @@
+//! The trainer's configuration: networks, texture model, schedule and loss weights, with the
+//! named presets `paper`, `quick` and `tiny`. Saved next to every run as `config.json`.
+
+use bitt_nets::{BittNetsConfig, Preset};
+use bitt_texture::ProceduralTextureConfig;
+
+use crate::BittError;
+
+/// The loss weights of paper Sec. 3.4 (eq. 6-10). Every term is a mean absolute difference
+/// (the reference's `L1Loss`, mean reduction).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LossWeights {
+    /// `lambda_rec` on `|I - I_fine|` (1: the paper gives it no other value).
+    pub rec: f64,
+    /// `lambda_rec^coarse` on `|I - I_coarse|` (Sec. 3.4: 0.8).
+    pub rec_coarse: f64,
+    /// `lambda_rec^albedo` on `|I - I_albedo|` (Sec. 3.4: 0.4).
+    pub rec_albedo: f64,
+    /// `lambda_nv` on `sum_i |(T(h_i) - t_i)(1 - v_i)|` (Sec. 3.4: 0.2).
+    pub nv: f64,
+    /// `lambda_alb` on the albedo consistency loss (Sec. 3.4: 0.2).
+    pub alb: f64,
+    /// `lambda_sym` on `|t_l - t_r|` (Sec. 3.4: 0.3).
+    pub sym: f64,
+}
+
+impl Default for LossWeights {
+    fn default() -> Self {
+        LossWeights {
+            rec: 1.0,
+            rec_coarse: 0.8,
+            rec_albedo: 0.4,
+            nv: 0.2,
+            alb: 0.2,
+            sym: 0.3,
+        }
+    }
+}
+
+/// Adam and its step schedule (paper Sec. 4.1 and the reference trainer).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct OptimConfig {
+    /// Initial learning rate (Sec. 4.1: 1e-3).
+    pub learning_rate: f64,
+    /// Adam beta1 (PyTorch default 0.9).
+    pub beta1: f64,
+    /// Adam beta2 (PyTorch default 0.999).
+    pub beta2: f64,
+    /// Adam epsilon (PyTorch default 1e-8).
+    pub epsilon: f64,
+    /// The learning rate is multiplied by `decay_gamma` every `decay_step` iterations
+    /// (Sec. 4.1: halved every 200).
+    pub decay_step: usize,
+    /// See `decay_step` (0.5).
+    pub decay_gamma: f64,
+    /// Floor of the learning rate (the reference's `LEARNING_RATE_CLIP`, 1e-5).
+    pub min_learning_rate: f64,
+}
+
+impl Default for OptimConfig {
+    fn default() -> Self {
+        OptimConfig {
+            learning_rate: 1e-3,
+            beta1: 0.9,
+            beta2: 0.999,
+            epsilon: 1e-8,
+            decay_step: 200,
+            decay_gamma: 0.5,
+            min_learning_rate: 1e-5,
+        }
+    }
+}
+
+impl OptimConfig {
+    /// The learning rate of iteration `i` (0-based), before any NaN back-off.
+    pub fn learning_rate_at(&self, i: usize) -> f64 {
+        let decays = i.checked_div(self.decay_step).unwrap_or(0);
+        (self.learning_rate * self.decay_gamma.powi(decays as i32)).max(self.min_learning_rate)
+    }
+}
+
+/// Everything a per-scene training run needs besides its input.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct TrainConfig {
+    /// The preset this configuration started from.
+    pub preset: Preset,
+    /// The four networks; `nets.image_size` is the side every input image is cropped and
+    /// resized to.
+    pub nets: BittNetsConfig,
+    /// The procedural texture PCA (used when no HTML model is given); its `resolution` is
+    /// the UV texture side and its `components` the coefficients per hand of `H`.
+    pub texture: ProceduralTextureConfig,
+    /// Iterations (Sec. 4.1: 700).
+    pub iterations: usize,
+    /// Optimiser and schedule.
+    pub optim: OptimConfig,
+    /// Loss weights.
+    pub loss: LossWeights,
+    /// Write a checkpoint every this many iterations (and at the end).
+    pub checkpoint_every: usize,
+    /// Seed of the network initialisation.
+    pub seed: u64,
+}
+
+impl TrainConfig {
+    /// The named configuration.
+    ///
+    /// - `paper`: the paper's networks at 256 x 256, 700 iterations, 1024 x 1024 textures
+    ///   (the size of HTML's UV map) and a 101-component texture PCA (HTML's count).
+    /// - `quick`: the CPU demo: 128 x 128 images, 256 x 256 textures, narrower networks,
+    ///   fewer iterations with the schedule scaled to match.
+    /// - `tiny`: tests and backend checks.
+    pub fn preset(preset: Preset) -> Self {
+        let mut nets = BittNetsConfig::preset(preset);
+        let (resolution, identities, components, iterations, decay_step, checkpoint_every) =
+            match preset {
+                Preset::Paper => (1024, 64, 101, 700, 200, 50),
+                Preset::Quick => (256, 40, 24, 100, 30, 10),
+                Preset::Tiny => (128, 8, 8, 6, 4, 2),
+            };
+        nets.html.coefficients_per_hand = components;
+        TrainConfig {
+            preset,
+            nets,
+            texture: ProceduralTextureConfig {
+                resolution,
+                identities,
+                held_out: 2,
+                components,
+                ..ProceduralTextureConfig::default()
+            },
+            iterations,
+            optim: OptimConfig {
+                decay_step,
+                ..OptimConfig::default()
+            },
+            loss: LossWeights::default(),
+            checkpoint_every,
+            seed: 0,
+        }
+    }
+
+    /// Checks ranges and that the parts fit together.
+    pub fn validate(&self) -> Result<(), BittError> {
+        let bad = |m: String| Err(BittError::Invalid(m));
+        self.nets.validate()?;
+        self.texture.validate()?;
+        if self.nets.html.coefficients_per_hand != self.texture.components {
+            return bad(format!(
+                "the HTML network predicts {} coefficients per hand but the texture PCA has {}",
+                self.nets.html.coefficients_per_hand, self.texture.components
+            ));
+        }
+        if self.iterations == 0 {
+            return bad("iterations must be at least 1".into());
+        }
+        if self.checkpoint_every == 0 {
+            return bad("checkpoint_every must be at least 1".into());
+        }
+        let o = &self.optim;
+        let finite_pos = |x: f64| x.is_finite() && x > 0.0;
+        let ok = finite_pos(o.learning_rate)
+            && finite_pos(o.epsilon)
+            && finite_pos(o.decay_gamma)
+            && (0.0..1.0).contains(&o.beta1)
+            && (0.0..1.0).contains(&o.beta2)
+            && o.min_learning_rate.is_finite()
+            && o.min_learning_rate >= 0.0;
+        if !ok {
+            return bad(format!("optimiser settings out of range: {o:?}"));
+        }
+        let w = &self.loss;
+        if [w.rec, w.rec_coarse, w.rec_albedo, w.nv, w.alb, w.sym]
+            .iter()
+            .any(|x| !x.is_finite() || *x < 0.0)
+        {
+            return bad(format!("loss weights must be finite and >= 0: {w:?}"));
+        }
+        Ok(())
+    }
+
+    /// Reads a `config.json`.
+    pub fn from_json(text: &str, path: &std::path::Path) -> Result<Self, BittError> {
+        let c: TrainConfig = serde_json::from_str(text)
+            .map_err(|e| BittError::corrupt(path, format!("not a training config: {e}")))?;
+        c.validate()?;
+        Ok(c)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn presets_validate_and_round_trip_through_json() {
+        for p in Preset::ALL {
+            let c = TrainConfig::preset(p);
+            c.validate().unwrap();
+            let text = serde_json::to_string(&c).unwrap();
+            let back = TrainConfig::from_json(&text, std::path::Path::new("c.json")).unwrap();
+            assert_eq!(serde_json::to_string(&back).unwrap(), text);
+        }
+        let paper = TrainConfig::preset(Preset::Paper);
+        assert_eq!(paper.iterations, 700);
+        assert_eq!(paper.nets.html.coefficients_per_hand, 101);
+    }
+
+    #[test]
+    fn schedule_halves_every_decay_step_down_to_the_floor() {
+        let o = OptimConfig::default();
+        assert_eq!(o.learning_rate_at(0), 1e-3);
+        assert_eq!(o.learning_rate_at(199), 1e-3);
+        assert_eq!(o.learning_rate_at(200), 5e-4);
+        assert_eq!(o.learning_rate_at(699), 1.25e-4);
+        assert_eq!(o.learning_rate_at(200 * 20), 1e-5);
+    }
+
+    #[test]
+    fn mismatched_coefficients_are_rejected() {
+        let mut c = TrainConfig::preset(Preset::Tiny);
+        c.texture.components = 5;
+        assert!(
+            c.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("coefficients")
+        );
+    }
+}

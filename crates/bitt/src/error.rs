@@ -1,0 +1,66 @@
+//! The error type of the pipeline crate.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong in the pipeline, the trainer and the run outputs.
+#[derive(Debug, thiserror::Error)]
+pub enum BittError {
+    /// A configuration or input outside its documented range.
+    #[error("{0}")]
+    Invalid(String),
+    /// Reading or writing a file.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// A file that exists but is not what it should be.
+    #[error("{path}: {message}")]
+    Corrupt {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// A loss or output that is not finite.
+    #[error("non-finite value: {0}")]
+    NonFinite(String),
+    /// The run was interrupted (Ctrl-C); the last state is saved.
+    #[error("interrupted at iteration {0}; the run was saved and can be resumed")]
+    Interrupted(usize),
+    /// From the geometry crate.
+    #[error(transparent)]
+    Mesh(#[from] bitt_mesh::MeshError),
+    /// From the texture crate.
+    #[error(transparent)]
+    Texture(#[from] bitt_texture::TextureError),
+    /// From the renderer.
+    #[error(transparent)]
+    Render(#[from] bitt_render::RenderError),
+    /// From the networks.
+    #[error(transparent)]
+    Nets(#[from] bitt_nets::NetsError),
+    /// From the synthetic generator.
+    #[error(transparent)]
+    Synth(#[from] bitt_synth::SynthError),
+}
+
+impl BittError {
+    /// An I/O error on `path`.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        BittError::Io {
+            path: path.into(),
+            source,
+        }
+    }
+
+    /// A corrupt file.
+    pub fn corrupt(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
+        BittError::Corrupt {
+            path: path.into(),
+            message: message.into(),
+        }
+    }
+}

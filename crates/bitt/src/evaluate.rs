@@ -1,0 +1,230 @@
+//! Rendering a trained avatar at other views, poses and lights, and measuring it against
+//! ground truth (synthetic scenes).
+
+use bitt_mesh::glam::DVec3;
+use bitt_mesh::{PinholeCamera, TwoHandScene};
+use bitt_render::scene::{LightValues, PointLight};
+use burn::tensor::{Tensor, TensorData};
+
+use crate::BittError;
+use crate::assets::ViewGeometry;
+use crate::metrics::{ImageMetrics, image_metrics, texel_l1};
+use crate::trainer::{Trainer, read};
+
+/// Host copies of a trained avatar: compact textures `[3, T]` and the estimated light.
+#[derive(Debug, Clone)]
+pub struct Avatar {
+    /// Fine textures (BTR output), left then right.
+    pub fine: [Vec<f32>; 2],
+    /// Coarse textures `T(h_i)`.
+    pub coarse: [Vec<f32>; 2],
+    /// Unwrapped visible albedo texels `u_i`.
+    pub albedo_uv: [Vec<f32>; 2],
+    /// Visible masks `v_i` (one value per texel).
+    pub visible: [Vec<f32>; 2],
+    /// The estimated light in the training camera's frame.
+    pub light: LightValues,
+    /// The training camera (to move the light to other views).
+    pub camera: PinholeCamera,
+}
+
+impl Avatar {
+    /// Reads the avatar of the trainer's current networks (one forward pass).
+    pub fn from_trainer(trainer: &Trainer) -> Result<Self, BittError> {
+        let o = trainer.forward()?;
+        let host = |t: &Tensor<3>| read(t.clone().inner());
+        let pair = |a: &[Tensor<3>; 2]| -> Result<[Vec<f32>; 2], BittError> {
+            Ok([host(&a[0])?, host(&a[1])?])
+        };
+        let l = &o.light;
+        let mut values = Vec::with_capacity(12);
+        for part in [&l.ambient, &l.diffuse, &l.specular, &l.location] {
+            values.extend(read(part.clone().inner())?);
+        }
+        let light =
+            LightValues::from_array(values.try_into().map_err(|_| {
+                BittError::Invalid("the light network did not give 12 values".into())
+            })?);
+        let avatar = Avatar {
+            fine: pair(&o.fine)?,
+            coarse: pair(&o.coarse)?,
+            albedo_uv: pair(&o.unwrapped)?,
+            visible: pair(&trainer.view.visible)?,
+            light,
+            camera: trainer.view.geometry.scene_camera,
+        };
+        avatar.check_finite()?;
+        Ok(avatar)
+    }
+
+    /// Fails when any value is not finite (nothing non-finite is ever written).
+    pub fn check_finite(&self) -> Result<(), BittError> {
+        for (name, v) in [
+            ("left fine texture", &self.fine[0]),
+            ("right fine texture", &self.fine[1]),
+            ("left coarse texture", &self.coarse[0]),
+            ("right coarse texture", &self.coarse[1]),
+        ] {
+            if v.iter().any(|x| !x.is_finite()) {
+                return Err(BittError::NonFinite(name.into()));
+            }
+        }
+        if self.light.to_array().iter().any(|x| !x.is_finite()) {
+            return Err(BittError::NonFinite("estimated light".into()));
+        }
+        Ok(())
+    }
+
+    /// The estimated light moved from the training camera's frame to `camera`'s frame (the
+    /// light stays where it is in the world).
+    pub fn light_for(&self, camera: &PinholeCamera) -> LightValues {
+        let l = self.light.location;
+        let p = DVec3::new(f64::from(l[0]), f64::from(l[1]), f64::from(l[2]));
+        let world = self.camera.camera_to_world(p);
+        let q = camera.world_to_camera(world);
+        LightValues {
+            location: [q.x as f32, q.y as f32, q.z as f32],
+            ..self.light
+        }
+    }
+}
+
+/// Renders compact textures on the hands of `scene` (a view or pose) under `light`:
+/// the image `[3, H, W]` on the host.
+pub fn render_view(
+    trainer: &Trainer,
+    scene: &TwoHandScene,
+    textures: &[Vec<f32>; 2],
+    light: &LightValues,
+) -> Result<Vec<f32>, BittError> {
+    let device = trainer.view.image.device().inner();
+    let geometry = ViewGeometry::new(&trainer.assets, scene, &device)?;
+    render_geometry(trainer, &geometry, textures, &light.to_light(&device))
+}
+
+/// [`render_view`] for prepared geometry and a light on the geometry's device.
+pub fn render_geometry(
+    trainer: &Trainer,
+    geometry: &ViewGeometry,
+    textures: &[Vec<f32>; 2],
+    light: &PointLight,
+) -> Result<Vec<f32>, BittError> {
+    let device = geometry.vertices[0].device();
+    let t = trainer.assets.num_texels();
+    let tex = |v: &Vec<f32>| Tensor::<2>::from_data(TensorData::new(v.clone(), [3, t]), &device);
+    let gather = trainer.assets.gather(&device);
+    let r = geometry.render(
+        &trainer.assets,
+        &gather,
+        [tex(&textures[0]), tex(&textures[1])],
+        light,
+        &trainer.settings,
+    )?;
+    read(r.image)
+}
+
+/// Metrics of the fine and coarse renders of one ground-truth view.
+#[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
+pub struct ViewScore {
+    /// BiTT (fine stage).
+    pub fine: ImageMetrics,
+    /// Coarse stage only (the HTML baseline).
+    pub coarse: ImageMetrics,
+}
+
+/// Texture-space errors against ground-truth textures (mean absolute difference per colour
+/// value), split by visibility in the input view.
+#[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
+pub struct TextureScore {
+    /// Fine texture, texels visible in the input (on their own hand).
+    pub fine_visible: Option<f64>,
+    /// Fine texture, texels invisible in the input on their own hand.
+    pub fine_invisible: Option<f64>,
+    /// Coarse texture, texels visible in the input.
+    pub coarse_visible: Option<f64>,
+    /// Coarse texture, texels invisible in the input.
+    pub coarse_invisible: Option<f64>,
+}
+
+/// Means of several image metrics.
+pub fn mean_metrics(all: &[ImageMetrics]) -> Option<ImageMetrics> {
+    if all.is_empty() {
+        return None;
+    }
+    let n = all.len() as f64;
+    let ms: Vec<f64> = all.iter().filter_map(|m| m.ms_ssim).collect();
+    Some(ImageMetrics {
+        l1: all.iter().map(|m| m.l1).sum::<f64>() / n,
+        psnr: all.iter().map(|m| m.psnr).sum::<f64>() / n,
+        ssim: all.iter().map(|m| m.ssim).sum::<f64>() / n,
+        ms_ssim: (ms.len() == all.len()).then(|| ms.iter().sum::<f64>() / n),
+    })
+}
+
+/// Scores a rendered view against its ground truth image times its hand masks.
+pub fn score_view(
+    trainer: &Trainer,
+    avatar: &Avatar,
+    scene: &TwoHandScene,
+    gt_image: &[f32],
+    gt_masks: &[Vec<f32>; 2],
+) -> Result<(ViewScore, Vec<f32>, Vec<f32>), BittError> {
+    let light = avatar.light_for(&scene.camera);
+    let fine = render_view(trainer, scene, &avatar.fine, &light)?;
+    let coarse = render_view(trainer, scene, &avatar.coarse, &light)?;
+    let (h, w) = (scene.camera.height as usize, scene.camera.width as usize);
+    let gt = hand_image(gt_image, gt_masks, h * w)?;
+    let size = [3, h, w];
+    Ok((
+        ViewScore {
+            fine: image_metrics(&fine, &gt, size),
+            coarse: image_metrics(&coarse, &gt, size),
+        },
+        fine,
+        coarse,
+    ))
+}
+
+/// `image * (mask_l + mask_r)` clamped: the ground-truth hand image.
+pub fn hand_image(image: &[f32], masks: &[Vec<f32>; 2], hw: usize) -> Result<Vec<f32>, BittError> {
+    if image.len() != 3 * hw || masks.iter().any(|m| m.len() != hw) {
+        return Err(BittError::Invalid(format!(
+            "ground-truth image/masks do not match the camera's {hw} pixels"
+        )));
+    }
+    let mut out = image.to_vec();
+    for ch in 0..3 {
+        for p in 0..hw {
+            let m = (masks[0][p] + masks[1][p]).min(1.0);
+            out[ch * hw + p] *= m;
+        }
+    }
+    Ok(out)
+}
+
+/// Texture errors of an avatar against ground-truth textures `[3, T]` (left, right).
+pub fn score_textures(avatar: &Avatar, gt: &[Vec<f32>; 2]) -> TextureScore {
+    let cat = |a: &[Vec<f32>; 2]| -> Vec<f32> {
+        // Both hands as one [3, 2T] texture (channel-major per hand, then concatenated).
+        let t = a[0].len() / 3;
+        let mut out = Vec::with_capacity(6 * t);
+        for ch in 0..3 {
+            out.extend_from_slice(&a[0][ch * t..(ch + 1) * t]);
+            out.extend_from_slice(&a[1][ch * t..(ch + 1) * t]);
+        }
+        out
+    };
+    let visible: Vec<bool> = avatar.visible[0]
+        .iter()
+        .chain(&avatar.visible[1])
+        .map(|&v| v > 0.5)
+        .collect();
+    let invisible: Vec<bool> = visible.iter().map(|v| !v).collect();
+    let (fine, coarse, gt) = (cat(&avatar.fine), cat(&avatar.coarse), cat(gt));
+    TextureScore {
+        fine_visible: texel_l1(&fine, &gt, &visible),
+        fine_invisible: texel_l1(&fine, &gt, &invisible),
+        coarse_visible: texel_l1(&coarse, &gt, &visible),
+        coarse_invisible: texel_l1(&coarse, &gt, &invisible),
+    }
+}

@@ -1,0 +1,211 @@
+//! Bringing an input image of any size to the preset's square size: crop a square around
+//! both hands, resize, and adjust the camera intrinsics to match.
+
+use bitt_mesh::PinholeCamera;
+use bitt_mesh::glam::{DMat3, DVec3};
+
+use crate::BittError;
+
+/// Margin around the hands' pixel box, as a fraction of its larger side.
+pub const CROP_MARGIN: f64 = 0.15;
+
+/// An image `[3, H, W]` (channel-major, values in `[0, 1]`) with its camera and optional mask
+/// `[H, W]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImageInput {
+    /// Pixels.
+    pub image: Vec<f32>,
+    /// Optional hand mask.
+    pub mask: Option<Vec<f32>>,
+    /// The camera of the image.
+    pub camera: PinholeCamera,
+}
+
+impl ImageInput {
+    /// `[H, W]`.
+    pub fn size(&self) -> [usize; 2] {
+        [self.camera.height as usize, self.camera.width as usize]
+    }
+
+    /// Crops a square around `hands_box` (`[x0, y0, x1, y1]` pixels; the square is the box's
+    /// larger side plus [`CROP_MARGIN`], centred on the box; pixels outside the image are
+    /// black) and resizes it to `size x size` by area averaging (bilinear when enlarging).
+    /// The camera's principal point and focal lengths follow. Returns `self` unchanged when
+    /// it already is `size x size` and `hands_box` is `None`.
+    pub fn fit_square(&self, hands_box: Option<[f64; 4]>, size: usize) -> Result<Self, BittError> {
+        let [h, w] = self.size();
+        if self.image.len() != 3 * h * w {
+            return Err(BittError::Invalid(format!(
+                "image has {} values, the camera says 3 x {h} x {w}",
+                self.image.len()
+            )));
+        }
+        if let Some(m) = &self.mask
+            && m.len() != h * w
+        {
+            return Err(BittError::Invalid(format!(
+                "mask has {} values, the image is {h} x {w}",
+                m.len()
+            )));
+        }
+        if size == 0 {
+            return Err(BittError::Invalid("target size must be positive".into()));
+        }
+        let (x0, y0, side) = match hands_box {
+            None if h == size && w == size => return Ok(self.clone()),
+            None => {
+                let side = h.min(w) as f64;
+                ((w as f64 - side) / 2.0, (h as f64 - side) / 2.0, side)
+            }
+            Some([bx0, by0, bx1, by1]) => {
+                if !(bx1 > bx0 && by1 > by0 && [bx0, by0, bx1, by1].iter().all(|v| v.is_finite())) {
+                    return Err(BittError::Invalid(format!(
+                        "hands box {:?} is empty or not finite",
+                        [bx0, by0, bx1, by1]
+                    )));
+                }
+                let side = (bx1 - bx0).max(by1 - by0) * (1.0 + CROP_MARGIN);
+                let (cx, cy) = ((bx0 + bx1) / 2.0, (by0 + by1) / 2.0);
+                (cx - side / 2.0, cy - side / 2.0, side)
+            }
+        };
+        let scale = size as f64 / side;
+        let sample = |plane: &[f32]| resample(plane, h, w, x0, y0, side, size);
+        let mut image = Vec::with_capacity(3 * size * size);
+        for ch in 0..3 {
+            image.extend(sample(&self.image[ch * h * w..(ch + 1) * h * w]));
+        }
+        let mask = self.mask.as_ref().map(|m| {
+            sample(m)
+                .into_iter()
+                .map(|v| if v > 0.5 { 1.0 } else { 0.0 })
+                .collect()
+        });
+        let k = self.camera.intrinsics;
+        let (fx, fy) = (k.x_axis.x, k.y_axis.y);
+        let (cx, cy) = (k.z_axis.x, k.z_axis.y);
+        let intrinsics = DMat3::from_cols(
+            DVec3::new(fx * scale, 0.0, 0.0),
+            DVec3::new(k.y_axis.x * scale, fy * scale, 0.0),
+            DVec3::new((cx - x0) * scale, (cy - y0) * scale, 1.0),
+        );
+        let camera = PinholeCamera::new(
+            intrinsics,
+            self.camera.rotation,
+            self.camera.translation,
+            size as u32,
+            size as u32,
+        )?;
+        Ok(ImageInput {
+            image,
+            mask,
+            camera,
+        })
+    }
+}
+
+/// Resamples the square `[x0, x0 + side) x [y0, y0 + side)` of an `h x w` plane to
+/// `size x size`: each output pixel averages the source over its footprint (a grid of
+/// bilinear samples, at least 2 x 2 per pixel).
+fn resample(
+    plane: &[f32],
+    h: usize,
+    w: usize,
+    x0: f64,
+    y0: f64,
+    side: f64,
+    size: usize,
+) -> Vec<f32> {
+    let step = side / size as f64;
+    let taps = (step.ceil() as usize).max(2);
+    let at = |x: f64, y: f64| -> f64 {
+        // Pixel centres at integer + 1/2.
+        let (fx, fy) = (x - 0.5, y - 0.5);
+        let (c0, r0) = (fx.floor(), fy.floor());
+        let (tx, ty) = (fx - c0, fy - r0);
+        let get = |r: f64, c: f64| -> f64 {
+            if r < 0.0 || c < 0.0 || r >= h as f64 || c >= w as f64 {
+                0.0
+            } else {
+                f64::from(plane[r as usize * w + c as usize])
+            }
+        };
+        let top = get(r0, c0) * (1.0 - tx) + get(r0, c0 + 1.0) * tx;
+        let bottom = get(r0 + 1.0, c0) * (1.0 - tx) + get(r0 + 1.0, c0 + 1.0) * tx;
+        top * (1.0 - ty) + bottom * ty
+    };
+    let mut out = Vec::with_capacity(size * size);
+    for r in 0..size {
+        for c in 0..size {
+            let mut sum = 0.0;
+            for i in 0..taps {
+                for j in 0..taps {
+                    let x = x0 + (c as f64 + (j as f64 + 0.5) / taps as f64) * step;
+                    let y = y0 + (r as f64 + (i as f64 + 0.5) / taps as f64) * step;
+                    sum += at(x, y);
+                }
+            }
+            out.push((sum / (taps * taps) as f64) as f32);
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crop_and_resize_keeps_projections_consistent() {
+        let camera = PinholeCamera::looking_down_z(300.0, 200, 100);
+        // A bright pixel where a point projects.
+        let p = DVec3::new(0.02, -0.01, 0.5);
+        let px = camera.project(p).unwrap();
+        let (h, w) = (100usize, 200usize);
+        let mut image = vec![0.0f32; 3 * h * w];
+        let (c, r) = (px.x.floor() as usize, px.y.floor() as usize);
+        for ch in 0..3 {
+            for dr in 0..4 {
+                for dc in 0..4 {
+                    image[ch * h * w + (r + dr - 2) * w + (c + dc - 2)] = 1.0;
+                }
+            }
+        }
+        let input = ImageInput {
+            image,
+            mask: None,
+            camera,
+        };
+        let out = input
+            .fit_square(
+                Some([px.x - 20.0, px.y - 20.0, px.x + 20.0, px.y + 20.0]),
+                32,
+            )
+            .unwrap();
+        let q = out.camera.project(p).unwrap();
+        assert!(
+            (q.x - 16.0).abs() < 1e-9 && (q.y - 16.0).abs() < 1e-9,
+            "{q:?}"
+        );
+        // The bright square lands around the projection.
+        let v = out.image[(q.y as usize) * 32 + q.x as usize];
+        assert!(v > 0.3, "{v}");
+        assert!(out.image[0] == 0.0);
+    }
+
+    #[test]
+    fn bad_sizes_are_reported() {
+        let input = ImageInput {
+            image: vec![0.0; 10],
+            mask: None,
+            camera: PinholeCamera::looking_down_z(100.0, 8, 8),
+        };
+        assert!(
+            input
+                .fit_square(None, 4)
+                .unwrap_err()
+                .to_string()
+                .contains("values")
+        );
+    }
+}

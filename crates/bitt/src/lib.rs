@@ -1,0 +1,33 @@
+//! The BiTT pipeline (paper Sec. 3-4): from one image of two interacting hands and their
+//! meshes to relightable UV textures of both hands.
+//!
+//! - [`config`]: the trainer's configuration and the `paper` / `quick` / `tiny` presets.
+//! - [`assets`]: hand models, render meshes, texture layouts; one view's geometry.
+//! - [`input`]: cropping and resizing input images to the preset's size.
+//! - [`pipeline`]: the forward pass (scene estimation, coarse stage, fine stage).
+//! - [`losses`]: the paper's loss (eq. 6-10).
+//! - [`optim`], [`checkpoint`], [`trainer`]: Adam, checkpoints, the per-scene trainer.
+//! - [`metrics`], [`evaluate`]: image and texture metrics, renders at other views and poses.
+//! - [`outputs`], [`run`]: the run folder (textures, renders, avatar, metrics, report).
+
+pub mod assets;
+pub mod checkpoint;
+pub mod config;
+mod error;
+pub mod evaluate;
+pub mod input;
+pub mod losses;
+pub mod metrics;
+pub mod optim;
+pub mod outputs;
+pub mod pipeline;
+pub mod run;
+pub mod trainer;
+
+pub use config::{LossWeights, OptimConfig, TrainConfig};
+pub use error::BittError;
+pub use losses::LossTerms;
+pub use trainer::{Observer, Progress, Trainer};
+
+#[cfg(test)]
+mod tests;

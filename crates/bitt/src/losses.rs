@@ -1,0 +1,119 @@
+//! The training loss of paper Sec. 3.4 (eq. 6-10).
+//!
+//! Every `|.|_1` is a mean absolute difference over the elements involved (the reference's
+//! `L1Loss`). Differences from the reference implementation, which we do not follow:
+//! it adds `0.1 |t̂ - T(h)|` over all texels and an extra `L1(I_albedo, I)` inside the albedo
+//! term, and weighs the consistency pairs 0.15 / 0.2 / 0.04 instead of the paper's plain
+//! pairwise sum. See `docs/training.md`.
+
+use burn::tensor::Tensor;
+
+use crate::config::LossWeights;
+use crate::pipeline::{Outputs, TrainingView};
+
+/// The loss terms of one iteration: the differentiable total and every term's value.
+#[derive(Debug, Clone)]
+pub struct Loss {
+    /// The weighted sum `L` (eq. 10), a one-element tensor.
+    pub total: Tensor<1>,
+    /// Unweighted terms, in the order of [`LossTerms::NAMES`].
+    pub terms: Vec<Tensor<1>>,
+}
+
+/// Host values of the loss terms (unweighted) and the weighted total.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LossTerms {
+    /// `|I - I_fine|`.
+    pub rec_fine: f64,
+    /// `|I - I_coarse|`.
+    pub rec_coarse: f64,
+    /// `|I - I_albedo|`.
+    pub rec_albedo: f64,
+    /// `sum_i |(T(h_i) - t̂_i)(1 - v_i)|` (eq. 7).
+    pub nv: f64,
+    /// Albedo consistency (eq. 8), 0 when disabled.
+    pub alb: f64,
+    /// `|t̂_l - t̂_r|` (eq. 9).
+    pub sym: f64,
+    /// The weighted total.
+    pub total: f64,
+}
+
+impl LossTerms {
+    /// Names of the terms, as in `metrics.json`.
+    pub const NAMES: [&'static str; 6] =
+        ["rec_fine", "rec_coarse", "rec_albedo", "nv", "alb", "sym"];
+
+    /// From the values of [`Loss::terms`] and the total.
+    pub fn from_values(v: &[f64], total: f64) -> Self {
+        LossTerms {
+            rec_fine: v[0],
+            rec_coarse: v[1],
+            rec_albedo: v[2],
+            nv: v[3],
+            alb: v[4],
+            sym: v[5],
+            total,
+        }
+    }
+
+    /// Every value finite.
+    pub fn is_finite(&self) -> bool {
+        [
+            self.rec_fine,
+            self.rec_coarse,
+            self.rec_albedo,
+            self.nv,
+            self.alb,
+            self.sym,
+            self.total,
+        ]
+        .iter()
+        .all(|x| x.is_finite())
+    }
+}
+
+fn l1<const D: usize>(a: Tensor<D>, b: Tensor<D>) -> Tensor<1> {
+    (a - b).abs().mean()
+}
+
+/// The paper's total loss (eq. 10) for one forward pass.
+///
+/// - `L_rec = |I - I_fine| + 0.8 |I - I_coarse| + 0.4 |I - I_albedo|` with `I = I_hand`, the
+///   input image times the hand mask (the renders are black off the hands);
+/// - `L_nv = sum_i mean |(T(h_i) - t̂_i)(1 - v_i)|`;
+/// - `L_alb = sum_{i<j} mean |A(I_coarse,l_i) - A(I_coarse,l_j)|` over the three lights;
+/// - `L_sym = mean |t̂_l - t̂_r|`.
+pub fn loss(outputs: &Outputs, view: &TrainingView, w: &LossWeights) -> Loss {
+    let target = view.hand_image.clone();
+    let rec_fine = l1(outputs.fine_image.clone(), target.clone());
+    let rec_coarse = l1(outputs.coarse_image.clone(), target.clone());
+    let rec_albedo = l1(outputs.albedo_render.clone(), target);
+    let nv = (0..2)
+        .map(|i| {
+            let hidden = view.visible[i].clone().neg().add_scalar(1.0);
+            ((outputs.coarse[i].clone() - outputs.fine[i].clone()) * hidden)
+                .abs()
+                .mean()
+        })
+        .reduce(|a, b| a + b)
+        .expect("two hands");
+    let alb = match &outputs.consistency_albedos {
+        Some(a) => {
+            let one = |i: usize| a.clone().narrow(0, i, 1);
+            l1(one(0), one(1)) + l1(one(0), one(2)) + l1(one(1), one(2))
+        }
+        None => rec_fine.zeros_like(),
+    };
+    let sym = l1(outputs.fine[0].clone(), outputs.fine[1].clone());
+    let total = rec_fine.clone().mul_scalar(w.rec)
+        + rec_coarse.clone().mul_scalar(w.rec_coarse)
+        + rec_albedo.clone().mul_scalar(w.rec_albedo)
+        + nv.clone().mul_scalar(w.nv)
+        + alb.clone().mul_scalar(w.alb)
+        + sym.clone().mul_scalar(w.sym);
+    Loss {
+        total,
+        terms: vec![rec_fine, rec_coarse, rec_albedo, nv, alb, sym],
+    }
+}

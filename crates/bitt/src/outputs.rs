@@ -1,0 +1,229 @@
+//! Writing a run's files: images, textures, light, glTF avatar, loss plot, metrics and the
+//! self-contained HTML report. Every file is written atomically.
+
+use std::path::Path;
+
+use bitt_mesh::export::{ExportHand, glb_bytes, png_bytes, write_atomically};
+use bitt_texture::TextureLayout;
+
+use crate::BittError;
+use crate::losses::LossTerms;
+
+/// `[3, H, W]` values in `[0, 1]` to an 8-bit RGB image (non-finite values are an error).
+pub fn rgb_image(values: &[f32], h: usize, w: usize) -> Result<image::RgbImage, BittError> {
+    if values.len() != 3 * h * w {
+        return Err(BittError::Invalid(format!(
+            "image has {} values, expected 3 x {h} x {w}",
+            values.len()
+        )));
+    }
+    if values.iter().any(|v| !v.is_finite()) {
+        return Err(BittError::NonFinite("image to write".into()));
+    }
+    let hw = h * w;
+    let mut img = image::RgbImage::new(w as u32, h as u32);
+    for (i, px) in img.pixels_mut().enumerate() {
+        for ch in 0..3 {
+            px.0[ch] = (values[ch * hw + i].clamp(0.0, 1.0) * 255.0).round() as u8;
+        }
+    }
+    Ok(img)
+}
+
+/// Writes `[3, H, W]` values as a PNG.
+pub fn write_png(path: &Path, values: &[f32], h: usize, w: usize) -> Result<(), BittError> {
+    let img = rgb_image(values, h, w)?;
+    write_atomically(path, &png_bytes(&img)?)?;
+    Ok(())
+}
+
+/// A grey `[1, H, W]`-style mask as a `[3, H, W]` image.
+pub fn mask_rgb(mask: &[f32]) -> Vec<f32> {
+    mask.iter().chain(mask).chain(mask).copied().collect()
+}
+
+/// A compact texture `[3, T]` as a UV image `[3, S, S]` (unused texels black).
+pub fn texture_image(layout: &TextureLayout, compact: &[f32]) -> Result<Vec<f32>, BittError> {
+    Ok(layout.compact_to_image(compact, [0.0; 3])?)
+}
+
+/// Panels `[3, h, w]` side by side in rows of `columns` (grey background).
+pub fn contact_sheet(
+    panels: &[Vec<f32>],
+    h: usize,
+    w: usize,
+    columns: usize,
+) -> (Vec<f32>, usize, usize) {
+    let columns = columns.max(1);
+    let rows = panels.len().div_ceil(columns).max(1);
+    let (gh, gw) = (rows * h, columns * w);
+    let mut out = vec![0.2f32; 3 * gh * gw];
+    for (k, p) in panels.iter().enumerate() {
+        let (r0, c0) = ((k / columns) * h, (k % columns) * w);
+        for ch in 0..3 {
+            for r in 0..h {
+                for c in 0..w {
+                    out[ch * gh * gw + (r0 + r) * gw + c0 + c] = p[ch * h * w + r * w + c];
+                }
+            }
+        }
+    }
+    (out, gh, gw)
+}
+
+/// The loss curves (total and each term, log scale) as a PNG plot.
+pub fn write_loss_plot(path: &Path, history: &[LossTerms]) -> Result<(), BittError> {
+    let (w, h) = (640u32, 360u32);
+    let mut img = image::RgbImage::from_pixel(w, h, image::Rgb([255, 255, 255]));
+    let series: Vec<(Vec<f64>, [u8; 3])> = vec![
+        (history.iter().map(|t| t.total).collect(), [0, 0, 0]),
+        (history.iter().map(|t| t.rec_fine).collect(), [220, 50, 47]),
+        (
+            history.iter().map(|t| t.rec_coarse).collect(),
+            [38, 139, 210],
+        ),
+        (
+            history.iter().map(|t| t.rec_albedo).collect(),
+            [133, 153, 0],
+        ),
+        (history.iter().map(|t| t.nv).collect(), [211, 54, 130]),
+        (history.iter().map(|t| t.alb).collect(), [181, 137, 0]),
+        (history.iter().map(|t| t.sym).collect(), [42, 161, 152]),
+    ];
+    let positive = series
+        .iter()
+        .flat_map(|(s, _)| s.iter().copied())
+        .filter(|v| v.is_finite() && *v > 0.0);
+    let (lo, hi) = positive.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+        (a.min(v), b.max(v))
+    });
+    let (margin, pw, ph) = (40.0, f64::from(w) - 60.0, f64::from(h) - 60.0);
+    // Axes.
+    for x in 40..(w - 20) {
+        img.put_pixel(x, h - 20, image::Rgb([0, 0, 0]));
+    }
+    for y in 20..(h - 20) {
+        img.put_pixel(40, y, image::Rgb([0, 0, 0]));
+    }
+    if history.len() >= 2 && lo.is_finite() && hi > lo {
+        let (llo, lhi) = (lo.log10(), hi.log10());
+        // Decade grid lines.
+        let mut d = llo.floor();
+        while d <= lhi.ceil() {
+            if d >= llo && d <= lhi {
+                let y = margin - 20.0 + ph * (1.0 - (d - llo) / (lhi - llo));
+                for x in (41..(w - 20)).step_by(4) {
+                    img.put_pixel(x, y.round() as u32, image::Rgb([200, 200, 200]));
+                }
+            }
+            d += 1.0;
+        }
+        let n = history.len() - 1;
+        for (s, color) in &series {
+            let mut prev: Option<(f64, f64)> = None;
+            for (i, &v) in s.iter().enumerate() {
+                if !(v.is_finite() && v > 0.0) {
+                    prev = None;
+                    continue;
+                }
+                let x = margin + pw * i as f64 / n as f64;
+                let y = margin - 20.0 + ph * (1.0 - (v.log10() - llo) / (lhi - llo));
+                if let Some((px, py)) = prev {
+                    let steps = ((x - px).abs().max((y - py).abs()).ceil() as usize).max(1);
+                    for k in 0..=steps {
+                        let t = k as f64 / steps as f64;
+                        let (qx, qy) = (px + (x - px) * t, py + (y - py) * t);
+                        if qx >= 0.0 && qy >= 0.0 && qx < f64::from(w) && qy < f64::from(h) {
+                            img.put_pixel(qx as u32, qy as u32, image::Rgb(*color));
+                        }
+                    }
+                }
+                prev = Some((x, y));
+            }
+        }
+    }
+    write_atomically(path, &png_bytes(&img)?)?;
+    Ok(())
+}
+
+/// Both hands as a textured glTF binary (`avatar.glb`).
+pub fn write_avatar_glb(
+    path: &Path,
+    hands: &[(
+        &str,
+        &[bitt_mesh::glam::DVec3],
+        &bitt_mesh::HandModel,
+        &image::RgbImage,
+    ); 2],
+) -> Result<(), BittError> {
+    let export: Vec<ExportHand> = hands
+        .iter()
+        .map(|(name, vertices, model, texture)| ExportHand {
+            name,
+            vertices,
+            faces: &model.faces,
+            uv: model.uv.as_ref(),
+            texture: Some(texture),
+        })
+        .collect();
+    write_atomically(path, &glb_bytes(&export)?)?;
+    Ok(())
+}
+
+/// Writes JSON (pretty) atomically.
+pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), BittError> {
+    let text = serde_json::to_string_pretty(value)
+        .map_err(|e| BittError::corrupt(path, format!("cannot encode JSON: {e}")))?;
+    write_atomically(path, text.as_bytes())?;
+    Ok(())
+}
+
+/// Base64 of bytes (for images embedded in the HTML report).
+pub fn base64(bytes: &[u8]) -> String {
+    const T: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
+    for chunk in bytes.chunks(3) {
+        let b = [
+            chunk[0],
+            *chunk.get(1).unwrap_or(&0),
+            *chunk.get(2).unwrap_or(&0),
+        ];
+        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
+        for k in 0..4 {
+            if k <= chunk.len() {
+                out.push(T[((n >> (18 - 6 * k)) & 63) as usize] as char);
+            } else {
+                out.push('=');
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn base64_matches_rfc4648_vectors() {
+        for (i, o) in [
+            ("", ""),
+            ("f", "Zg=="),
+            ("fo", "Zm8="),
+            ("foo", "Zm9v"),
+            ("foob", "Zm9vYg=="),
+            ("fooba", "Zm9vYmE="),
+            ("foobar", "Zm9vYmFy"),
+        ] {
+            assert_eq!(base64(i.as_bytes()), o);
+        }
+    }
+
+    #[test]
+    fn non_finite_images_are_refused() {
+        assert!(rgb_image(&[f32::NAN, 0.0, 0.0], 1, 1).is_err());
+        assert!(rgb_image(&[0.0; 2], 1, 1).is_err());
+        let img = rgb_image(&[1.0, 0.5, 0.0], 1, 1).unwrap();
+        assert_eq!(img.get_pixel(0, 0).0, [255, 128, 0]);
+    }
+}

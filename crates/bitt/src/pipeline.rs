@@ -1,0 +1,271 @@
+//! The BiTT forward pass (paper Fig. 2, Sec. 3.1-3.3): scene estimation, coarse stage and fine
+//! stage on one training view, with every image the losses need.
+
+use bitt_nets::{BittNets, LightParams, compose_texels};
+use bitt_render::scene::{PointLight, RenderSettings, UnwrapPlan, UnwrapSettings};
+use bitt_texture::{LayoutGather, TexturePcaTensors};
+use burn::tensor::{Device, Tensor, TensorData};
+
+use crate::BittError;
+use crate::assets::{HandAssets, ViewGeometry};
+
+/// The fixed inputs of one training view on the training device: the image `I`, the hand
+/// mask, the hand image `I_hand = I * mask`, and where each texel lands in the image.
+#[derive(Debug, Clone)]
+pub struct TrainingView {
+    /// Geometry of the view.
+    pub geometry: ViewGeometry,
+    /// The input image `I`, `[1, 3, S, S]`.
+    pub image: Tensor<4>,
+    /// The two-hand mask, `[1, 1, S, S]` in `{0, 1}`.
+    pub mask: Tensor<4>,
+    /// `I * mask`, `[1, 3, S, S]`.
+    pub hand_image: Tensor<4>,
+    /// Unwrap plans, left then right.
+    pub plans: [UnwrapPlan; 2],
+    /// Visible masks `v_i` `[1, 1, T]`, left then right.
+    pub visible: [Tensor<3>; 2],
+}
+
+impl TrainingView {
+    /// Prepares a view from its image `[3, S, S]` (values in `[0, 1]`, channel-major) and an
+    /// optional mask `[S, S]`; without a mask, the silhouette of the given meshes is used
+    /// (as the reference does).
+    pub fn new(
+        assets: &HandAssets,
+        geometry: ViewGeometry,
+        image: &[f32],
+        mask: Option<&[f32]>,
+        device: &Device,
+    ) -> Result<Self, BittError> {
+        let [h, w] = geometry.size();
+        if image.len() != 3 * h * w {
+            return Err(BittError::Invalid(format!(
+                "image has {} values; the camera needs 3 x {h} x {w}",
+                image.len()
+            )));
+        }
+        if let Some(i) = image.iter().position(|v| !v.is_finite()) {
+            return Err(BittError::Invalid(format!(
+                "image value {i} is {}",
+                image[i]
+            )));
+        }
+        // The raster of both hands: depth buffer for unwrapping, silhouette for the mask.
+        let light = bitt_render::scene::LightValues::default().to_light(device);
+        let t = assets.num_texels();
+        let zeros = Tensor::<2>::zeros([3, t], device);
+        let gather = assets.gather(device);
+        let settings = RenderSettings {
+            antialias: false,
+            ..RenderSettings::default()
+        };
+        let silhouette =
+            geometry.render(assets, &gather, [zeros.clone(), zeros], &light, &settings)?;
+        let unwrap = UnwrapSettings::default();
+        let plan = |i: usize| {
+            UnwrapPlan::new(
+                &geometry.camera,
+                &assets.surfaces[i],
+                &geometry.vertices_host[i],
+                &silhouette.raster,
+                &unwrap,
+            )
+        };
+        let plans = [plan(0)?, plan(1)?];
+        let mask = match mask {
+            Some(m) => {
+                if m.len() != h * w {
+                    return Err(BittError::Invalid(format!(
+                        "mask has {} values; the image is {h} x {w}",
+                        m.len()
+                    )));
+                }
+                let m: Vec<f32> = m.iter().map(|&v| if v > 0.5 { 1.0 } else { 0.0 }).collect();
+                Tensor::<4>::from_data(TensorData::new(m, [1, 1, h, w]), device)
+            }
+            None => {
+                let [l, r] = [silhouette.masks[0].clone(), silhouette.masks[1].clone()];
+                (l + r).clamp(0.0, 1.0).reshape([1, 1, h, w])
+            }
+        };
+        let image = Tensor::<4>::from_data(TensorData::new(image.to_vec(), [1, 3, h, w]), device);
+        let hand_image = image.clone() * mask.clone();
+        let visible = |p: &UnwrapPlan| {
+            let v: Vec<f32> = p
+                .visible()
+                .iter()
+                .map(|&b| if b { 1.0 } else { 0.0 })
+                .collect();
+            Tensor::<3>::from_data(TensorData::new(v, [1, 1, t]), device)
+        };
+        let visible = [visible(&plans[0]), visible(&plans[1])];
+        Ok(TrainingView {
+            geometry,
+            image,
+            mask,
+            hand_image,
+            plans,
+            visible,
+        })
+    }
+
+    /// Fraction of visible texels per hand.
+    pub fn visible_fraction(&self) -> [f64; 2] {
+        let f = |p: &UnwrapPlan| {
+            p.visible().iter().filter(|&&v| v).count() as f64 / p.num_texels().max(1) as f64
+        };
+        [f(&self.plans[0]), f(&self.plans[1])]
+    }
+}
+
+/// The scene light as the renderer's point light, from the light network's values.
+pub fn point_light(light: &LightParams) -> PointLight {
+    let row = |t: &Tensor<2>| t.clone().reshape([3]);
+    PointLight {
+        ambient: row(&light.ambient),
+        diffuse: row(&light.diffuse),
+        specular: row(&light.specular),
+        location: row(&light.location),
+    }
+}
+
+/// The two novel lights of the albedo consistency loss (supplement E): light 1 from below
+/// at half the brightness of white light; light 2 as light 1 with the estimated light's
+/// colour. "Below" is `+y` of the camera frame (image rows grow downwards), 1 m away, and
+/// the diffuse and specular parts are the reference's relighting values (0.3, 0.2).
+pub fn consistency_lights(estimated: &PointLight) -> [PointLight; 2] {
+    let device = estimated.ambient.device();
+    let c = |v: [f32; 3]| Tensor::<1>::from_data(TensorData::new(v.to_vec(), [3]), &device);
+    let below = c([0.0, 1.0, 0.0]);
+    let white = PointLight {
+        ambient: c([0.5; 3]),
+        diffuse: c([0.3; 3]),
+        specular: c([0.2; 3]),
+        location: below,
+    };
+    let coloured = PointLight {
+        ambient: estimated.ambient.clone(),
+        ..white.clone()
+    };
+    [white, coloured]
+}
+
+/// Everything one forward pass produces (batch 1; compact textures are `[1, 3, T]`).
+#[derive(Debug, Clone)]
+pub struct Outputs {
+    /// The estimated light `l̂ = L(I)`.
+    pub light: PointLight,
+    /// The albedo image `A(I_hand)`, `[1, 3, S, S]`.
+    pub albedo_image: Tensor<4>,
+    /// Texture PCA coefficients `h_l, h_r`, `[1, K]` each.
+    pub coefficients: [Tensor<2>; 2],
+    /// Coarse textures `T(h_i)`, `[1, 3, T]`.
+    pub coarse: [Tensor<3>; 2],
+    /// Unwrapped visible albedo texels `u_i`, `[1, 3, T]` (zero where not visible).
+    pub unwrapped: [Tensor<3>; 2],
+    /// BTR inputs `t_i = T(h_i)(1 - v_i) + u_i`, `[1, 3, T]`.
+    pub composed: [Tensor<3>; 2],
+    /// Fine textures `t̂_i`, `[1, 3, T]`.
+    pub fine: [Tensor<3>; 2],
+    /// `I_fine`: the fine textures under `l̂`, `[1, 3, S, S]`.
+    pub fine_image: Tensor<4>,
+    /// `I_coarse`: the coarse textures under `l̂`.
+    pub coarse_image: Tensor<4>,
+    /// `I_albedo`: the visible albedo texels under `l̂`.
+    pub albedo_render: Tensor<4>,
+    /// `A(I_coarse, l)` for the three lights (estimated, white below, coloured below),
+    /// masked by the hand mask; `[3, 3, S, S]`. `None` when the consistency weight is 0.
+    pub consistency_albedos: Option<Tensor<4>>,
+}
+
+/// One forward pass of BiTT on a training view (paper Fig. 2).
+///
+/// `L(I)` gives the light; `H(I_hand)` the coarse textures `T(h_i)`; the coarse textures are
+/// rendered under the estimated light and the two consistency lights; the albedo network
+/// runs once on the batch `[I_hand, I_coarse under 3 lights]`; the albedo image is unwrapped
+/// to `u_i`, composed with `T(h_i)` and refined by BTR; `I_fine` and `I_albedo` are rendered
+/// under the estimated light.
+#[allow(clippy::too_many_arguments)]
+pub fn forward(
+    nets: &BittNets,
+    pca: &TexturePcaTensors,
+    assets: &HandAssets,
+    gather: &LayoutGather,
+    view: &TrainingView,
+    settings: &RenderSettings,
+    with_consistency: bool,
+) -> Result<Outputs, BittError> {
+    let [_, _, h, w] = view.image.dims();
+    let light = point_light(&nets.light.predict(view.image.clone()));
+    let coeffs = nets.html.predict(view.hand_image.clone());
+    let t = assets.num_texels();
+    let coarse_both = pca.textures(Tensor::cat(
+        vec![coeffs.left.clone(), coeffs.right.clone()],
+        0,
+    ));
+    let coarse = [
+        coarse_both.clone().narrow(0, 0, 1),
+        coarse_both.narrow(0, 1, 1),
+    ];
+    let compact = |x: &Tensor<3>| x.clone().reshape([3, t]);
+    let render_with =
+        |textures: [Tensor<3>; 2], light: &PointLight| -> Result<Tensor<4>, BittError> {
+            let r = view.geometry.render(
+                assets,
+                gather,
+                [compact(&textures[0]), compact(&textures[1])],
+                light,
+                settings,
+            )?;
+            Ok(r.image.reshape([1, 3, h, w]))
+        };
+    let coarse_image = render_with(coarse.clone(), &light)?;
+    let mut albedo_batch = vec![view.hand_image.clone()];
+    if with_consistency {
+        albedo_batch.push(coarse_image.clone());
+        for l in consistency_lights(&light) {
+            albedo_batch.push(render_with(coarse.clone(), &l)?);
+        }
+    }
+    let albedos = nets.albedo.forward(Tensor::cat(albedo_batch, 0));
+    let albedo_image = albedos.clone().narrow(0, 0, 1);
+    let consistency_albedos = with_consistency.then(|| albedos.narrow(0, 1, 3) * view.mask.clone());
+    let albedo_chw = albedo_image.clone().reshape([3, h, w]);
+    let unwrap = |i: usize| -> Result<Tensor<3>, BittError> {
+        Ok(view.plans[i]
+            .apply(albedo_chw.clone())?
+            .texels
+            .reshape([1, 3, t]))
+    };
+    let unwrapped = [unwrap(0)?, unwrap(1)?];
+    let composed = [
+        compose_texels(
+            coarse[0].clone(),
+            unwrapped[0].clone(),
+            view.visible[0].clone(),
+        ),
+        compose_texels(
+            coarse[1].clone(),
+            unwrapped[1].clone(),
+            view.visible[1].clone(),
+        ),
+    ];
+    let out = nets.btr.forward(composed[0].clone(), composed[1].clone());
+    let fine = [out.left, out.right];
+    let fine_image = render_with(fine.clone(), &light)?;
+    let albedo_render = render_with(unwrapped.clone(), &light)?;
+    Ok(Outputs {
+        light,
+        albedo_image,
+        coefficients: [coeffs.left, coeffs.right],
+        coarse,
+        unwrapped,
+        composed,
+        fine,
+        fine_image,
+        coarse_image,
+        albedo_render,
+        consistency_albedos,
+    })
+}

@@ -1,0 +1,647 @@
+//! A whole per-scene run: prepare the trainer from a synthetic scene, train (resumably),
+//! evaluate against ground truth, and write the run folder.
+
+use std::path::{Path, PathBuf};
+
+use bitt_mesh::glam::{DMat3, DVec3};
+use bitt_mesh::{PinholeCamera, TwoHandScene, procedural_pair};
+use bitt_render::scene::LightValues;
+use bitt_synth::SynthScene;
+use bitt_texture::{TexturePca, procedural_texture_pca};
+use burn::tensor::Device;
+
+use crate::BittError;
+use crate::assets::{HandAssets, ViewGeometry};
+use crate::config::TrainConfig;
+use crate::evaluate::{
+    Avatar, TextureScore, ViewScore, mean_metrics, render_view, score_textures, score_view,
+};
+use crate::input::ImageInput;
+use crate::metrics::{ImageMetrics, image_metrics};
+use crate::outputs::{
+    base64, contact_sheet, mask_rgb, rgb_image, texture_image, write_avatar_glb, write_json,
+    write_loss_plot, write_png,
+};
+use crate::trainer::{Trainer, read};
+
+/// Writes one named PNG `[3, h, w]` and lists it in the report.
+type PngSink<'a> = dyn FnMut(&str, PathBuf, &[f32], usize, usize) -> Result<(), BittError> + 'a;
+
+/// A scored view: scores, fine render, coarse render, ground-truth hand image.
+type Scored = (ViewScore, Vec<f32>, Vec<f32>, Vec<f32>);
+
+/// Names of the files of a run folder.
+pub mod files {
+    /// The resolved configuration.
+    pub const CONFIG: &str = "config.json";
+    /// The latest checkpoint.
+    pub const CHECKPOINT: &str = "checkpoint.safetensors";
+    /// Metrics and loss history.
+    pub const METRICS: &str = "metrics.json";
+    /// The estimated light.
+    pub const LIGHT: &str = "light.json";
+    /// The report.
+    pub const REPORT: &str = "report.html";
+    /// The avatar.
+    pub const AVATAR: &str = "avatar.glb";
+    /// Loss curves.
+    pub const LOSS_PLOT: &str = "loss.png";
+    /// The scene a run was trained on (synthetic runs), to resume without the generator.
+    pub const SCENE: &str = "scene";
+}
+
+/// The texture PCA of `config.texture`, read from `cache_dir` when fitted before, else fitted
+/// (seconds to a minute) and cached there.
+pub fn texture_prior(
+    config: &TrainConfig,
+    cache_dir: Option<&Path>,
+    device: &Device,
+) -> Result<TexturePca, BittError> {
+    let key = {
+        let text = serde_json::to_string(&config.texture).unwrap_or_default();
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        for b in text.bytes() {
+            h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+        }
+        format!("procedural-pca-{h:016x}.safetensors")
+    };
+    if let Some(dir) = cache_dir {
+        let path = dir.join(&key);
+        if path.is_file() {
+            match TexturePca::load_safetensors(&path) {
+                Ok(p) => return Ok(p),
+                Err(_) => {
+                    // A corrupt cache entry is refitted and overwritten below.
+                }
+            }
+        }
+    }
+    let (pca, _, _) = procedural_texture_pca(&config.texture, device)?;
+    if let Some(dir) = cache_dir {
+        std::fs::create_dir_all(dir).map_err(|e| BittError::io(dir, e))?;
+        pca.save_safetensors(&dir.join(key))?;
+    }
+    Ok(pca)
+}
+
+/// A trainer for a synthetic scene: the given (possibly noisy) meshes, the training image
+/// (cropped and resized when its size is not the preset's), the procedural hand models.
+pub fn synthetic_trainer(
+    scene: &SynthScene,
+    config: &TrainConfig,
+    pca: &TexturePca,
+    device: &Device,
+) -> Result<Trainer, BittError> {
+    let assets = HandAssets::new(procedural_pair(), config.texture.resolution)?;
+    let size = config.nets.image_size;
+    let input = ImageInput {
+        image: scene.train.image.clone(),
+        mask: None,
+        camera: scene.given.camera,
+    };
+    let input = if input.size() == [size, size] {
+        input
+    } else {
+        input.fit_square(None, size)?
+    };
+    let given = TwoHandScene {
+        camera: input.camera,
+        ..scene.given.clone()
+    };
+    let geometry = ViewGeometry::new(&assets, &given, device)?;
+    Trainer::new(
+        config.clone(),
+        assets,
+        pca,
+        geometry,
+        &input.image,
+        input.mask.as_deref(),
+        device,
+    )
+}
+
+/// Ground-truth scores of a synthetic run.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct SyntheticScores {
+    /// The input view (appearance reconstruction).
+    pub input_view: ViewScore,
+    /// Mean over the novel views.
+    pub novel_views: Option<MeanScore>,
+    /// Mean over the novel poses.
+    pub novel_poses: Option<MeanScore>,
+    /// Texture-space errors (`None` when the scene's ground-truth textures use another
+    /// texture size than the run).
+    pub texture: Option<TextureScore>,
+}
+
+/// Means of fine and coarse metrics over several views.
+#[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
+pub struct MeanScore {
+    /// BiTT (fine).
+    pub fine: ImageMetrics,
+    /// Coarse stage.
+    pub coarse: ImageMetrics,
+    /// Views averaged.
+    pub count: usize,
+}
+
+fn mean_score(scores: &[ViewScore]) -> Option<MeanScore> {
+    let fine: Vec<ImageMetrics> = scores.iter().map(|s| s.fine).collect();
+    let coarse: Vec<ImageMetrics> = scores.iter().map(|s| s.coarse).collect();
+    Some(MeanScore {
+        fine: mean_metrics(&fine)?,
+        coarse: mean_metrics(&coarse)?,
+        count: scores.len(),
+    })
+}
+
+/// What [`write_run`] measured, for the caller to print.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct RunSummary {
+    /// Iterations trained.
+    pub iterations: usize,
+    /// Training seconds.
+    pub seconds: f64,
+    /// Final loss terms.
+    pub final_loss: Option<crate::LossTerms>,
+    /// PSNR of `I_fine` against the input hand image.
+    pub input_psnr: f64,
+    /// Ground-truth scores (synthetic scenes).
+    pub synthetic: Option<SyntheticScores>,
+}
+
+/// A camera turned by `angle` radians about the vertical axis through `center` (camera
+/// frame): a turntable view of the same hands.
+pub fn orbit_camera(camera: &PinholeCamera, center: DVec3, yaw: f64, pitch: f64) -> PinholeCamera {
+    let turn = DMat3::from_rotation_x(pitch) * DMat3::from_rotation_y(yaw);
+    PinholeCamera {
+        rotation: turn * camera.rotation,
+        translation: turn * (camera.translation - center) + center,
+        ..*camera
+    }
+}
+
+/// Writes every output of a trained run into `dir` and returns the summary.
+pub fn write_run(
+    dir: &Path,
+    trainer: &Trainer,
+    synthetic: Option<&SynthScene>,
+    turntable_frames: usize,
+) -> Result<RunSummary, BittError> {
+    let avatar = Avatar::from_trainer(trainer)?;
+    let outputs = trainer.forward()?;
+    let [_, _, h, w] = trainer.view.image.dims();
+    let host4 = |t: &burn::tensor::Tensor<4>| read(t.clone().inner());
+    let renders = dir.join("renders");
+    let textures = dir.join("textures");
+    for d in [&renders, &textures] {
+        std::fs::create_dir_all(d).map_err(|e| BittError::io(d, e))?;
+    }
+    let mut gallery: Vec<(String, PathBuf)> = Vec::new();
+    let mut png = |name: &str, path: PathBuf, values: &[f32], hh: usize, ww: usize| {
+        write_png(&path, values, hh, ww)?;
+        gallery.push((name.to_string(), path));
+        Ok::<(), BittError>(())
+    };
+
+    // Images of the training view.
+    let input = host4(&trainer.view.image)?;
+    let mask = host4(&trainer.view.mask)?;
+    let fine_image = host4(&outputs.fine_image)?;
+    png("input", renders.join("input.png"), &input, h, w)?;
+    png("mask", renders.join("mask.png"), &mask_rgb(&mask), h, w)?;
+    png(
+        "albedo image A(I)",
+        renders.join("albedo.png"),
+        &(host4(&outputs.albedo_image)?
+            .iter()
+            .zip(mask_rgb(&mask))
+            .map(|(a, m)| a * m)
+            .collect::<Vec<_>>()),
+        h,
+        w,
+    )?;
+    png(
+        "coarse (I_coarse)",
+        renders.join("coarse.png"),
+        &host4(&outputs.coarse_image)?,
+        h,
+        w,
+    )?;
+    png("fine (I_fine)", renders.join("fine.png"), &fine_image, h, w)?;
+    png(
+        "visible albedo (I_albedo)",
+        renders.join("albedo_render.png"),
+        &host4(&outputs.albedo_render)?,
+        h,
+        w,
+    )?;
+
+    // Relit: a white light from below and the estimated colour from below (supplement E).
+    let geometry = &trainer.view.geometry;
+    let device = geometry.vertices[0].device();
+    let lights = [
+        (
+            "relit: white light from below",
+            "relit_white.png",
+            LightValues {
+                ambient: [0.5; 3],
+                diffuse: [0.3; 3],
+                specular: [0.2; 3],
+                location: [0.0, 1.0, 0.0],
+            },
+        ),
+        (
+            "relit: estimated colour from below",
+            "relit_colour.png",
+            LightValues {
+                diffuse: [0.3; 3],
+                specular: [0.2; 3],
+                location: [0.0, 1.0, 0.0],
+                ..avatar.light
+            },
+        ),
+    ];
+    for (name, file, light) in lights {
+        let img = crate::evaluate::render_geometry(
+            trainer,
+            geometry,
+            &avatar.fine,
+            &light.to_light(&device),
+        )?;
+        png(name, renders.join(file), &img, h, w)?;
+    }
+
+    // Turntable of novel views (orbiting the hands' centre).
+    let center = {
+        let all: Vec<DVec3> = trainer
+            .view
+            .geometry
+            .vertices_host
+            .iter()
+            .flatten()
+            .copied()
+            .collect();
+        all.iter().copied().sum::<DVec3>() / all.len().max(1) as f64
+    };
+    let given = trainer_scene(trainer, synthetic);
+    let frames_dir = renders.join("turntable");
+    std::fs::create_dir_all(&frames_dir).map_err(|e| BittError::io(&frames_dir, e))?;
+    let mut frames = Vec::new();
+    for k in 0..turntable_frames {
+        let yaw = std::f64::consts::TAU * k as f64 / turntable_frames.max(1) as f64;
+        // Vertices are in the camera frame: orbit a camera at the origin.
+        let cam = orbit_camera(
+            &PinholeCamera {
+                rotation: DMat3::IDENTITY,
+                translation: DVec3::ZERO,
+                ..avatar.camera
+            },
+            center,
+            yaw,
+            0.0,
+        );
+        let scene = TwoHandScene {
+            camera: compose(&cam, &given.camera),
+            ..given.clone()
+        };
+        let img = render_view(
+            trainer,
+            &scene,
+            &avatar.fine,
+            &avatar.light_for(&scene.camera),
+        )?;
+        write_png(&frames_dir.join(format!("frame_{k:03}.png")), &img, h, w)?;
+        frames.push(img);
+    }
+    if !frames.is_empty() {
+        let (sheet, sh, sw) = contact_sheet(&frames, h, w, frames.len().min(6));
+        png(
+            "turntable (novel views)",
+            renders.join("turntable.png"),
+            &sheet,
+            sh,
+            sw,
+        )?;
+    }
+
+    // Textures: PNG per hand and stage, all compact textures in one safetensors file.
+    let layout = &trainer.assets.layouts[0];
+    let s = trainer.assets.texture_size;
+    let mut st_entries: Vec<(String, Vec<f32>)> = Vec::new();
+    for (i, side) in ["left", "right"].iter().enumerate() {
+        for (stage, values) in [
+            ("fine", &avatar.fine[i]),
+            ("coarse", &avatar.coarse[i]),
+            ("albedo_uv", &avatar.albedo_uv[i]),
+            ("visible_mask", &mask_rgb(&avatar.visible[i])),
+        ] {
+            let img = texture_image(layout, values)?;
+            png(
+                &format!("{side} texture: {stage}"),
+                textures.join(format!("{side}_{stage}.png")),
+                &img,
+                s,
+                s,
+            )?;
+            st_entries.push((format!("{side}.{stage}"), values.clone()));
+        }
+    }
+    write_texture_safetensors(
+        &textures.join("textures.safetensors"),
+        &st_entries,
+        layout.num_texels(),
+        s,
+    )?;
+    write_json(&dir.join(files::LIGHT), &light_json(&avatar.light))?;
+
+    // The avatar, posed as in the input.
+    let images = [
+        rgb_image(&texture_image(layout, &avatar.fine[0])?, s, s)?,
+        rgb_image(&texture_image(layout, &avatar.fine[1])?, s, s)?,
+    ];
+    let v = &trainer.view.geometry.vertices_host;
+    write_avatar_glb(
+        &dir.join(files::AVATAR),
+        &[
+            ("left_hand", &v[0], &trainer.assets.models.left, &images[0]),
+            (
+                "right_hand",
+                &v[1],
+                &trainer.assets.models.right,
+                &images[1],
+            ),
+        ],
+    )?;
+
+    // Ground truth.
+    let input_hand = host4(&trainer.view.hand_image)?;
+    let input_psnr = image_metrics(&fine_image, &input_hand, [3, h, w]).psnr;
+    let synthetic_scores = match synthetic {
+        Some(scene) => Some(score_synthetic(
+            trainer, &avatar, scene, &mut png, &renders,
+        )?),
+        None => None,
+    };
+    write_loss_plot(&dir.join(files::LOSS_PLOT), &trainer.history)?;
+    gallery.push(("loss".into(), dir.join(files::LOSS_PLOT)));
+    let summary = RunSummary {
+        iterations: trainer.iteration,
+        seconds: trainer.seconds(),
+        final_loss: trainer.history.last().copied(),
+        input_psnr,
+        synthetic: synthetic_scores,
+    };
+    let metrics = serde_json::json!({
+        "summary": summary,
+        "loss_terms": crate::LossTerms::NAMES,
+        "history": trainer.history,
+        "events": trainer.events,
+        "visible_fraction": trainer.view.visible_fraction(),
+        "num_texels": trainer.assets.num_texels(),
+    });
+    write_json(&dir.join(files::METRICS), &metrics)?;
+    write_report(&dir.join(files::REPORT), trainer, &summary, &gallery)?;
+    Ok(summary)
+}
+
+/// World-to-camera of `orbit` (a camera-frame orbit) after the scene camera `base`.
+fn compose(orbit: &PinholeCamera, base: &PinholeCamera) -> PinholeCamera {
+    PinholeCamera {
+        rotation: orbit.rotation * base.rotation,
+        translation: orbit.rotation * base.translation + orbit.translation,
+        ..*base
+    }
+}
+
+/// The hands and camera the trainer was built from.
+fn trainer_scene(trainer: &Trainer, synthetic: Option<&SynthScene>) -> TwoHandScene {
+    match synthetic {
+        Some(s) => TwoHandScene {
+            camera: trainer.view.geometry.scene_camera,
+            ..s.given.clone()
+        },
+        None => TwoHandScene {
+            left: None,
+            right: None,
+            camera: trainer.view.geometry.scene_camera,
+            frame: Default::default(),
+        },
+    }
+}
+
+fn score_synthetic(
+    trainer: &Trainer,
+    avatar: &Avatar,
+    scene: &SynthScene,
+    png: &mut PngSink,
+    renders: &Path,
+) -> Result<SyntheticScores, BittError> {
+    let size = trainer.config.nets.image_size;
+    let score = |view: &bitt_synth::SynthView| -> Result<Scored, BittError> {
+        // Bring ground truth to the preset's size like the input.
+        let input = ImageInput {
+            image: view.image.clone(),
+            mask: None,
+            camera: view.hands.camera,
+        };
+        let (image, masks, camera) = if input.size() == [size, size] {
+            (view.image.clone(), view.masks.clone(), view.hands.camera)
+        } else {
+            let f = input.fit_square(None, size)?;
+            let m = |m: &Vec<f32>| {
+                ImageInput {
+                    image: mask_rgb(m),
+                    mask: None,
+                    camera: view.hands.camera,
+                }
+                .fit_square(None, size)
+                .map(|x| x.image[..size * size].to_vec())
+            };
+            (
+                [f.image].concat(),
+                [m(&view.masks[0])?, m(&view.masks[1])?],
+                f.camera,
+            )
+        };
+        let hands = TwoHandScene {
+            camera,
+            ..view.hands.clone()
+        };
+        let (s, fine, coarse) = score_view(trainer, avatar, &hands, &image, &masks)?;
+        let gt = crate::evaluate::hand_image(&image, &masks, size * size)?;
+        Ok((s, fine, coarse, gt))
+    };
+    let (input_view, ..) = score(&scene.train)?;
+    let mut sheet = Vec::new();
+    let mut views = Vec::new();
+    for v in &scene.novel_views {
+        let (s, fine, coarse, gt) = score(v)?;
+        if sheet.is_empty() {
+            sheet.extend([gt, coarse, fine]);
+        }
+        views.push(s);
+    }
+    let mut poses = Vec::new();
+    for v in &scene.novel_poses {
+        let (s, fine, coarse, gt) = score(v)?;
+        if sheet.len() == 3 {
+            sheet.extend([gt, coarse, fine]);
+        }
+        poses.push(s);
+    }
+    if !sheet.is_empty() {
+        let (img, gh, gw) = contact_sheet(&sheet, size, size, 3);
+        png(
+            "ground truth | coarse | fine: novel view (top), novel pose (bottom)",
+            renders.join("novel_view_pose.png"),
+            &img,
+            gh,
+            gw,
+        )?;
+    }
+    Ok(SyntheticScores {
+        input_view,
+        novel_views: mean_score(&views),
+        novel_poses: mean_score(&poses),
+        texture: (scene.textures[0].len() == 3 * trainer.assets.num_texels())
+            .then(|| score_textures(avatar, &scene.textures)),
+    })
+}
+
+fn light_json(l: &LightValues) -> serde_json::Value {
+    serde_json::json!({
+        "ambient": l.ambient,
+        "diffuse": l.diffuse,
+        "specular": l.specular,
+        "location": l.location,
+        "frame": "training camera (metres; x right, y down, z forward)",
+    })
+}
+
+fn write_texture_safetensors(
+    path: &Path,
+    entries: &[(String, Vec<f32>)],
+    texels: usize,
+    size: usize,
+) -> Result<(), BittError> {
+    let bytes: Vec<(String, Vec<u8>, Vec<usize>)> = entries
+        .iter()
+        .map(|(n, v)| {
+            let c = v.len() / texels.max(1);
+            (
+                n.clone(),
+                v.iter().flat_map(|x| x.to_le_bytes()).collect(),
+                vec![c, texels],
+            )
+        })
+        .collect();
+    let mut views = Vec::new();
+    for (name, b, shape) in &bytes {
+        let view = safetensors::tensor::TensorView::new(safetensors::Dtype::F32, shape.clone(), b)
+            .map_err(|e| BittError::corrupt(path, format!("cannot encode {name}: {e}")))?;
+        views.push((name.clone(), view));
+    }
+    let meta = std::collections::HashMap::from([
+        ("format".to_string(), "bitt-run-textures".to_string()),
+        (
+            "layout".to_string(),
+            format!(
+                "compact [C, T] texels of a {size}x{size} UV map, row-major scan of used texels"
+            ),
+        ),
+    ]);
+    let data = safetensors::serialize(views, Some(meta))
+        .map_err(|e| BittError::corrupt(path, format!("cannot encode: {e}")))?;
+    bitt_mesh::export::write_atomically(path, &data)?;
+    Ok(())
+}
+
+fn fmt_metrics(m: &ImageMetrics) -> String {
+    format!(
+        "<td>{:.4}</td><td>{:.2}</td><td>{:.4}</td><td>{}</td>",
+        m.l1,
+        m.psnr,
+        m.ssim,
+        m.ms_ssim.map_or("n/a".to_string(), |v| format!("{v:.4}"))
+    )
+}
+
+fn write_report(
+    path: &Path,
+    trainer: &Trainer,
+    summary: &RunSummary,
+    gallery: &[(String, PathBuf)],
+) -> Result<(), BittError> {
+    let mut html = String::from(
+        "<!doctype html><html><head><meta charset=\"utf-8\"><title>BiTT run</title>\
+         <style>body{font-family:sans-serif;margin:2em;background:#fafafa}\
+         figure{display:inline-block;margin:.5em;vertical-align:top}\
+         figcaption{font-size:.85em;color:#444;max-width:24em}\
+         img{image-rendering:pixelated;border:1px solid #ccc;max-width:48em}\
+         table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:.2em .6em}</style>\
+         </head><body><h1>BiTT: two-hand texture reconstruction</h1>",
+    );
+    html.push_str(&format!(
+        "<p>Preset <b>{}</b>, {} iterations in {:.1} s, {} texels per hand. \
+         PSNR of the fine render against the input hand image: {:.2} dB.</p>",
+        trainer.config.preset,
+        summary.iterations,
+        summary.seconds,
+        trainer.assets.num_texels(),
+        summary.input_psnr
+    ));
+    if let Some(s) = &summary.synthetic {
+        html.push_str("<h2>Against ground truth</h2><table><tr><th>evaluation</th><th>method</th><th>L1</th><th>PSNR</th><th>SSIM</th><th>MS-SSIM</th></tr>");
+        let mut row = |name: &str, fine: &ImageMetrics, coarse: &ImageMetrics| {
+            html.push_str(&format!(
+                "<tr><td>{name}</td><td>coarse (HTML)</td>{}</tr>",
+                fmt_metrics(coarse)
+            ));
+            html.push_str(&format!(
+                "<tr><td>{name}</td><td><b>BiTT (fine)</b></td>{}</tr>",
+                fmt_metrics(fine)
+            ));
+        };
+        row("input view", &s.input_view.fine, &s.input_view.coarse);
+        if let Some(m) = &s.novel_views {
+            row(&format!("novel views ({})", m.count), &m.fine, &m.coarse);
+        }
+        if let Some(m) = &s.novel_poses {
+            row(&format!("novel poses ({})", m.count), &m.fine, &m.coarse);
+        }
+        html.push_str("</table>");
+        let f = |v: Option<f64>| v.map_or("n/a".into(), |v| format!("{v:.4}"));
+        if let Some(t) = &s.texture {
+            html.push_str(&format!(
+            "<p>Texture L1 against the ground-truth albedo: texels visible in the input: fine {} / coarse {}; invisible: fine {} / coarse {}.</p>",
+            f(t.fine_visible), f(t.coarse_visible), f(t.fine_invisible), f(t.coarse_invisible)
+        ));
+        }
+    }
+    if !trainer.events.is_empty() {
+        html.push_str("<h2>Recovered events</h2><ul>");
+        for (i, e) in &trainer.events {
+            html.push_str(&format!("<li>iteration {i}: {}</li>", escape(e)));
+        }
+        html.push_str("</ul>");
+    }
+    html.push_str("<h2>Images</h2>");
+    for (name, file) in gallery {
+        let bytes = std::fs::read(file).map_err(|e| BittError::io(file, e))?;
+        html.push_str(&format!(
+            "<figure><img src=\"data:image/png;base64,{}\"><figcaption>{}</figcaption></figure>",
+            base64(&bytes),
+            escape(name)
+        ));
+    }
+    html.push_str("</body></html>\n");
+    bitt_mesh::export::write_atomically(path, html.as_bytes())?;
+    Ok(())
+}
+
+fn escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+}
