@@ -397,13 +397,13 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some((cmd, rest)) = args.split_first() else {
         bail!(
-            "usage: cargo xtask <demo|test|e2e|train-scene|pose-hands|convert-mano|texture|convert-html|render|synth|fuzz|bench> [ARGS]"
+            "usage: cargo xtask <demo|test|e2e|train-scene|render-avatar|pose-hands|convert-mano|texture|convert-html|render|synth|fuzz|bench> [ARGS]"
         );
     };
     match cmd.as_str() {
         "demo" => bitt(&[&["demo".to_string()], rest].concat()),
         "pose-hands" | "convert-mano" | "texture" | "convert-html" | "render" | "train-scene"
-        | "synth" => bitt(&args),
+        | "render-avatar" | "synth" => bitt(&args),
         "test" => {
             let status = cargo()
                 .args(["test", "--workspace", "--release"])

@@ -10,6 +10,7 @@ mod device;
 mod nets;
 mod pose_hands;
 mod render;
+mod render_avatar;
 mod synth;
 mod texture;
 mod train_scene;
@@ -67,6 +68,8 @@ enum Command {
     /// Train BiTT on one scene (default: the built-in demo scene) and write the run folder:
     /// textures, light, renders, avatar.glb, metrics and report.html.
     TrainScene(train_scene::TrainSceneArgs),
+    /// Render a trained run's avatar at another view (`--view AZ,EL`), pose or light.
+    RenderAvatar(render_avatar::RenderAvatarArgs),
     /// Time the renderer's stages forward and backward (JSON; `cargo xtask bench render`).
     BenchRender(bench_render::BenchRenderArgs),
     /// Mean and largest absolute difference of two images (JSON; `cargo xtask e2e`).
@@ -98,6 +101,7 @@ fn main() -> Result<()> {
         Command::Render(args) => render::run(&args),
         Command::Synth(args) => synth::run(&args),
         Command::TrainScene(args) => train_scene::run(&args),
+        Command::RenderAvatar(args) => render_avatar::run(&args),
         Command::BenchRender(args) => bench_render::run(&args),
         Command::ImageDiff { a, b } => render::image_diff(&a, &b),
         Command::Nets(args) => nets::run(&args),

@@ -78,14 +78,18 @@ impl Avatar {
     /// The estimated light moved from the training camera's frame to `camera`'s frame (the
     /// light stays where it is in the world).
     pub fn light_for(&self, camera: &PinholeCamera) -> LightValues {
-        let l = self.light.location;
-        let p = DVec3::new(f64::from(l[0]), f64::from(l[1]), f64::from(l[2]));
-        let world = self.camera.camera_to_world(p);
-        let q = camera.world_to_camera(world);
-        LightValues {
-            location: [q.x as f32, q.y as f32, q.z as f32],
-            ..self.light
-        }
+        move_light(&self.light, &self.camera, camera)
+    }
+}
+
+/// `light` (in `from`'s camera frame) in `to`'s camera frame: the same place in the world.
+pub fn move_light(light: &LightValues, from: &PinholeCamera, to: &PinholeCamera) -> LightValues {
+    let l = light.location;
+    let p = DVec3::new(f64::from(l[0]), f64::from(l[1]), f64::from(l[2]));
+    let q = to.world_to_camera(from.camera_to_world(p));
+    LightValues {
+        location: [q.x as f32, q.y as f32, q.z as f32],
+        ..*light
     }
 }
 

@@ -645,3 +645,179 @@ fn escape(s: &str) -> String {
         .replace('<', "&lt;")
         .replace('>', "&gt;")
 }
+
+/// The camera the trainer sees for a synthetic scene: the given camera, adjusted when the
+/// scene's images are resized to the preset's size.
+pub fn training_camera(
+    scene: &SynthScene,
+    config: &TrainConfig,
+) -> Result<PinholeCamera, BittError> {
+    let size = config.nets.image_size;
+    let input = ImageInput {
+        image: vec![
+            0.0;
+            3 * scene.given.camera.width as usize * scene.given.camera.height as usize
+        ],
+        mask: None,
+        camera: scene.given.camera,
+    };
+    if input.size() == [size, size] {
+        Ok(input.camera)
+    } else {
+        Ok(input.fit_square(None, size)?.camera)
+    }
+}
+
+/// A trained avatar read back from a run folder: no networks needed to render it.
+#[derive(Debug, Clone)]
+pub struct SavedAvatar {
+    /// The run's configuration.
+    pub config: TrainConfig,
+    /// The run's scene.
+    pub scene: SynthScene,
+    /// Fine textures `[3, T]`, left then right.
+    pub fine: [Vec<f32>; 2],
+    /// The estimated light, in the training camera's frame.
+    pub light: LightValues,
+    /// The training camera.
+    pub camera: PinholeCamera,
+}
+
+impl SavedAvatar {
+    /// Reads `config.json`, the scene, `textures/textures.safetensors` and `light.json`.
+    pub fn load(dir: &Path) -> Result<Self, BittError> {
+        let path = dir.join(files::CONFIG);
+        let text = std::fs::read_to_string(&path).map_err(|e| BittError::io(&path, e))?;
+        let config = TrainConfig::from_json(&text, &path)?;
+        let scene = SynthScene::read(&dir.join(files::SCENE))?;
+        let path = dir.join("textures/textures.safetensors");
+        let bytes = std::fs::read(&path).map_err(|e| BittError::io(&path, e))?;
+        let st = safetensors::SafeTensors::deserialize(&bytes)
+            .map_err(|e| BittError::corrupt(&path, format!("not a safetensors file: {e}")))?;
+        let texture = |name: &str| -> Result<Vec<f32>, BittError> {
+            let t = st
+                .tensor(name)
+                .map_err(|_| BittError::corrupt(&path, format!("`{name}` is missing")))?;
+            if t.dtype() != safetensors::Dtype::F32 || t.shape().len() != 2 || t.shape()[0] != 3 {
+                return Err(BittError::corrupt(
+                    &path,
+                    format!(
+                        "`{name}` is {:?} {:?}, expected F32 [3, T]",
+                        t.dtype(),
+                        t.shape()
+                    ),
+                ));
+            }
+            let v: Vec<f32> = t
+                .data()
+                .chunks_exact(4)
+                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect();
+            if v.iter().any(|x| !x.is_finite()) {
+                return Err(BittError::corrupt(
+                    &path,
+                    format!("`{name}` holds non-finite values"),
+                ));
+            }
+            Ok(v)
+        };
+        let fine = [texture("left.fine")?, texture("right.fine")?];
+        let path = dir.join(files::LIGHT);
+        let text = std::fs::read_to_string(&path).map_err(|e| BittError::io(&path, e))?;
+        let light: LightValues = serde_json::from_str(&text)
+            .map_err(|e| BittError::corrupt(&path, format!("not a light: {e}")))?;
+        light
+            .validate()
+            .map_err(|e| BittError::corrupt(&path, e.to_string()))?;
+        let camera = training_camera(&scene, &config)?;
+        Ok(SavedAvatar {
+            config,
+            scene,
+            fine,
+            light,
+            camera,
+        })
+    }
+
+    /// Renders the avatar's hands posed as `hands` (its camera included) under `light`
+    /// (`None`: the estimated light, kept fixed in the world); `[3, H, W]` on the host.
+    pub fn render(
+        &self,
+        hands: &TwoHandScene,
+        light: Option<&LightValues>,
+        device: &Device,
+    ) -> Result<Vec<f32>, BittError> {
+        let assets = HandAssets::new(procedural_pair(), self.config.texture.resolution)?;
+        let t = assets.num_texels();
+        if self.fine[0].len() != 3 * t {
+            return Err(BittError::Invalid(format!(
+                "the saved textures have {} values; the {}x{} layout needs {}",
+                self.fine[0].len(),
+                self.config.texture.resolution,
+                self.config.texture.resolution,
+                3 * t
+            )));
+        }
+        let geometry = ViewGeometry::new(&assets, hands, device)?;
+        let light = match light {
+            Some(l) => *l,
+            None => crate::evaluate::move_light(&self.light, &self.camera, &hands.camera),
+        };
+        let tex = |v: &Vec<f32>| {
+            burn::tensor::Tensor::<2>::from_data(
+                burn::tensor::TensorData::new(v.clone(), [3, t]),
+                device,
+            )
+        };
+        let r = geometry.render(
+            &assets,
+            &assets.gather(device),
+            [tex(&self.fine[0]), tex(&self.fine[1])],
+            &light.to_light(device),
+            &bitt_render::scene::RenderSettings::default(),
+        )?;
+        read(r.image)
+    }
+
+    /// The hands of the training view (or of novel pose `pose`), seen from the training
+    /// camera orbited by `yaw` and `pitch` radians about the hands' centre.
+    pub fn view(
+        &self,
+        pose: Option<usize>,
+        yaw: f64,
+        pitch: f64,
+    ) -> Result<TwoHandScene, BittError> {
+        let mut hands = match pose {
+            None => self.scene.given.clone(),
+            Some(k) => {
+                let p = self.scene.novel_poses.get(k).ok_or_else(|| {
+                    BittError::Invalid(format!(
+                        "novel pose {k} asked; the scene has {}",
+                        self.scene.novel_poses.len()
+                    ))
+                })?;
+                p.hands.clone()
+            }
+        };
+        hands.camera = self.camera;
+        let posed = hands.pose_in_camera(&procedural_pair())?;
+        let all: Vec<DVec3> = [posed.left, posed.right]
+            .into_iter()
+            .flatten()
+            .flat_map(|h| h.vertices)
+            .collect();
+        let center = all.iter().copied().sum::<DVec3>() / all.len().max(1) as f64;
+        let orbit = orbit_camera(
+            &PinholeCamera {
+                rotation: DMat3::IDENTITY,
+                translation: DVec3::ZERO,
+                ..self.camera
+            },
+            center,
+            yaw,
+            pitch,
+        );
+        hands.camera = compose(&orbit, &self.camera);
+        Ok(hands)
+    }
+}

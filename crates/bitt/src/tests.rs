@@ -139,6 +139,25 @@ fn a_non_finite_loss_is_recovered_from() {
     let metrics: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
     assert_eq!(metrics["events"].as_array().unwrap().len(), 1);
+    // The saved avatar renders the training view as the trainer does (no networks needed).
+    std::fs::write(
+        dir.join("config.json"),
+        serde_json::to_string(&t.config).unwrap(),
+    )
+    .unwrap();
+    scene.write(&dir.join("scene")).unwrap();
+    let saved = crate::run::SavedAvatar::load(&dir).unwrap();
+    let hands = saved.view(None, 0.0, 0.0).unwrap();
+    let image = saved.render(&hands, None, &Device::flex()).unwrap();
+    let fine = crate::trainer::read(t.forward().unwrap().fine_image.inner()).unwrap();
+    let diff = image
+        .iter()
+        .zip(&fine)
+        .map(|(a, b)| (a - b).abs())
+        .sum::<f32>()
+        / fine.len() as f32;
+    assert!(diff < 1e-4, "saved avatar render differs by {diff}");
+    assert!(saved.view(Some(5), 0.0, 0.0).is_err());
     for h in metrics["history"].as_array().unwrap() {
         assert!(h["total"].as_f64().unwrap().is_finite(), "{h}");
     }
