@@ -121,6 +121,13 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
             (dir.clone(), config, scene, Some(checkpoint))
         }
         None => {
+            if args.out.join(files::CHECKPOINT).exists() {
+                bail!(
+                    "{} already holds a run; use --resume {} to continue it or choose another --out",
+                    args.out.display(),
+                    args.out.display()
+                );
+            }
             let mut config = TrainConfig::preset(args.preset);
             if let Some(n) = args.iterations {
                 config.iterations = n;
@@ -151,13 +158,6 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
     };
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     if resume.is_none() {
-        if out.join(files::CHECKPOINT).exists() {
-            bail!(
-                "{} already holds a run; use --resume {} to continue it or choose another --out",
-                out.display(),
-                out.display()
-            );
-        }
         bitt_mesh::export::write_atomically(
             &out.join(files::CONFIG),
             serde_json::to_string_pretty(&config)?.as_bytes(),
