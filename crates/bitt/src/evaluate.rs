@@ -9,6 +9,7 @@ use burn::tensor::{Tensor, TensorData};
 use crate::BittError;
 use crate::assets::ViewGeometry;
 use crate::metrics::{ImageMetrics, image_metrics, texel_l1};
+use crate::pipeline::Outputs;
 use crate::trainer::{Trainer, read};
 
 /// Host copies of a trained avatar: compact textures `[3, T]` and the estimated light.
@@ -31,7 +32,11 @@ pub struct Avatar {
 impl Avatar {
     /// Reads the avatar of the trainer's current networks (one forward pass).
     pub fn from_trainer(trainer: &Trainer) -> Result<Self, BittError> {
-        let o = trainer.forward()?;
+        Self::from_outputs(trainer, &trainer.forward()?)
+    }
+
+    /// Reads the avatar from a forward pass `o` of the trainer's networks.
+    pub fn from_outputs(trainer: &Trainer, o: &Outputs) -> Result<Self, BittError> {
         let host = |t: &Tensor<3>| read(t.clone().inner());
         let pair = |a: &[Tensor<3>; 2]| -> Result<[Vec<f32>; 2], BittError> {
             Ok([host(&a[0])?, host(&a[1])?])
@@ -173,9 +178,11 @@ pub fn score_view(
     gt_image: &[f32],
     gt_masks: &[Vec<f32>; 2],
 ) -> Result<(ViewScore, Vec<f32>, Vec<f32>), BittError> {
-    let light = avatar.light_for(&scene.camera);
-    let fine = render_view(trainer, scene, &avatar.fine, &light)?;
-    let coarse = render_view(trainer, scene, &avatar.coarse, &light)?;
+    let device = trainer.view.image.device().inner();
+    let geometry = ViewGeometry::new(&trainer.assets, scene, &device)?;
+    let light = avatar.light_for(&scene.camera).to_light(&device);
+    let fine = render_geometry(trainer, &geometry, &avatar.fine, &light)?;
+    let coarse = render_geometry(trainer, &geometry, &avatar.coarse, &light)?;
     let (h, w) = (scene.camera.height as usize, scene.camera.width as usize);
     let gt = hand_image(gt_image, gt_masks, h * w)?;
     let size = [3, h, w];

@@ -48,28 +48,10 @@ impl ImageInput {
                 m.len()
             )));
         }
-        if size == 0 {
-            return Err(BittError::Invalid("target size must be positive".into()));
+        if hands_box.is_none() && h == size && w == size {
+            return Ok(self.clone());
         }
-        let (x0, y0, side) = match hands_box {
-            None if h == size && w == size => return Ok(self.clone()),
-            None => {
-                let side = h.min(w) as f64;
-                ((w as f64 - side) / 2.0, (h as f64 - side) / 2.0, side)
-            }
-            Some([bx0, by0, bx1, by1]) => {
-                if !(bx1 > bx0 && by1 > by0 && [bx0, by0, bx1, by1].iter().all(|v| v.is_finite())) {
-                    return Err(BittError::Invalid(format!(
-                        "hands box {:?} is empty or not finite",
-                        [bx0, by0, bx1, by1]
-                    )));
-                }
-                let side = (bx1 - bx0).max(by1 - by0) * (1.0 + CROP_MARGIN);
-                let (cx, cy) = ((bx0 + bx1) / 2.0, (by0 + by1) / 2.0);
-                (cx - side / 2.0, cy - side / 2.0, side)
-            }
-        };
-        let scale = size as f64 / side;
+        let (x0, y0, side) = square_window([h, w], hands_box, size)?;
         let sample = |plane: &[f32]| resample(plane, h, w, x0, y0, side, size);
         let mut image = Vec::with_capacity(3 * size * size);
         for ch in 0..3 {
@@ -81,27 +63,82 @@ impl ImageInput {
                 .map(|v| if v > 0.5 { 1.0 } else { 0.0 })
                 .collect()
         });
-        let k = self.camera.intrinsics;
-        let (fx, fy) = (k.x_axis.x, k.y_axis.y);
-        let (cx, cy) = (k.z_axis.x, k.z_axis.y);
-        let intrinsics = DMat3::from_cols(
-            DVec3::new(fx * scale, 0.0, 0.0),
-            DVec3::new(k.y_axis.x * scale, fy * scale, 0.0),
-            DVec3::new((cx - x0) * scale, (cy - y0) * scale, 1.0),
-        );
-        let camera = PinholeCamera::new(
-            intrinsics,
-            self.camera.rotation,
-            self.camera.translation,
-            size as u32,
-            size as u32,
-        )?;
+        let camera = crop_camera(&self.camera, x0, y0, side, size)?;
         Ok(ImageInput {
             image,
             mask,
             camera,
         })
     }
+}
+
+/// The camera of [`ImageInput::fit_square`] alone, without touching pixels: the camera of
+/// an `[H, W]` image after cropping the square around `hands_box` (the centred square when
+/// `None`) and resizing it to `size x size`.
+pub fn fit_camera(
+    camera: &PinholeCamera,
+    hands_box: Option<[f64; 4]>,
+    size: usize,
+) -> Result<PinholeCamera, BittError> {
+    let [h, w] = [camera.height as usize, camera.width as usize];
+    if hands_box.is_none() && h == size && w == size {
+        return Ok(*camera);
+    }
+    let (x0, y0, side) = square_window([h, w], hands_box, size)?;
+    crop_camera(camera, x0, y0, side, size)
+}
+
+/// The square `(x0, y0, side)` in pixels cropped from an `[h, w]` image (see
+/// [`ImageInput::fit_square`]).
+fn square_window(
+    [h, w]: [usize; 2],
+    hands_box: Option<[f64; 4]>,
+    size: usize,
+) -> Result<(f64, f64, f64), BittError> {
+    if size == 0 {
+        return Err(BittError::Invalid("target size must be positive".into()));
+    }
+    match hands_box {
+        None => {
+            let side = h.min(w) as f64;
+            Ok(((w as f64 - side) / 2.0, (h as f64 - side) / 2.0, side))
+        }
+        Some([bx0, by0, bx1, by1]) => {
+            if !(bx1 > bx0 && by1 > by0 && [bx0, by0, bx1, by1].iter().all(|v| v.is_finite())) {
+                return Err(BittError::Invalid(format!(
+                    "hands box {:?} is empty or not finite",
+                    [bx0, by0, bx1, by1]
+                )));
+            }
+            let side = (bx1 - bx0).max(by1 - by0) * (1.0 + CROP_MARGIN);
+            let (cx, cy) = ((bx0 + bx1) / 2.0, (by0 + by1) / 2.0);
+            Ok((cx - side / 2.0, cy - side / 2.0, side))
+        }
+    }
+}
+
+/// `camera` after cropping the square `(x0, y0, side)` and resizing it to `size x size`.
+fn crop_camera(
+    camera: &PinholeCamera,
+    x0: f64,
+    y0: f64,
+    side: f64,
+    size: usize,
+) -> Result<PinholeCamera, BittError> {
+    let scale = size as f64 / side;
+    let k = camera.intrinsics;
+    let intrinsics = DMat3::from_cols(
+        DVec3::new(k.x_axis.x * scale, 0.0, 0.0),
+        DVec3::new(k.y_axis.x * scale, k.y_axis.y * scale, 0.0),
+        DVec3::new((k.z_axis.x - x0) * scale, (k.z_axis.y - y0) * scale, 1.0),
+    );
+    Ok(PinholeCamera::new(
+        intrinsics,
+        camera.rotation,
+        camera.translation,
+        size as u32,
+        size as u32,
+    )?)
 }
 
 /// Resamples the square `[x0, x0 + side) x [y0, y0 + side)` of an `h x w` plane to
@@ -183,6 +220,8 @@ mod tests {
             )
             .unwrap();
         let q = out.camera.project(p).unwrap();
+        let box_ = [px.x - 20.0, px.y - 20.0, px.x + 20.0, px.y + 20.0];
+        assert_eq!(fit_camera(&camera, Some(box_), 32).unwrap(), out.camera);
         assert!(
             (q.x - 16.0).abs() < 1e-9 && (q.y - 16.0).abs() < 1e-9,
             "{q:?}"

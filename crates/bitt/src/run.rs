@@ -170,8 +170,9 @@ pub struct RunSummary {
     pub synthetic: Option<SyntheticScores>,
 }
 
-/// A camera turned by `angle` radians about the vertical axis through `center` (camera
-/// frame): a turntable view of the same hands.
+/// `camera` orbited about `center` (a point in `camera`'s frame): turned by `yaw` radians
+/// about the camera's vertical axis and `pitch` about its horizontal axis, so it sees the
+/// same hands from another side (a turntable view).
 pub fn orbit_camera(camera: &PinholeCamera, center: DVec3, yaw: f64, pitch: f64) -> PinholeCamera {
     let turn = DMat3::from_rotation_x(pitch) * DMat3::from_rotation_y(yaw);
     PinholeCamera {
@@ -188,8 +189,8 @@ pub fn write_run(
     synthetic: Option<&SynthScene>,
     turntable_frames: usize,
 ) -> Result<RunSummary, BittError> {
-    let avatar = Avatar::from_trainer(trainer)?;
     let outputs = trainer.forward()?;
+    let avatar = Avatar::from_outputs(trainer, &outputs)?;
     let [_, _, h, w] = trainer.view.image.dims();
     let host4 = |t: &burn::tensor::Tensor<4>| read(t.clone().inner());
     let renders = dir.join("renders");
@@ -290,19 +291,9 @@ pub fn write_run(
     let mut frames = Vec::new();
     for k in 0..turntable_frames {
         let yaw = std::f64::consts::TAU * k as f64 / turntable_frames.max(1) as f64;
-        // Vertices are in the camera frame: orbit a camera at the origin.
-        let cam = orbit_camera(
-            &PinholeCamera {
-                rotation: DMat3::IDENTITY,
-                translation: DVec3::ZERO,
-                ..avatar.camera
-            },
-            center,
-            yaw,
-            0.0,
-        );
+        // The vertices' centre is in the training camera's frame.
         let scene = TwoHandScene {
-            camera: compose(&cam, &given.camera),
+            camera: orbit_camera(&given.camera, center, yaw, 0.0),
             ..given.clone()
         };
         let img = render_view(
@@ -403,15 +394,6 @@ pub fn write_run(
     write_json(&dir.join(files::METRICS), &metrics)?;
     write_report(&dir.join(files::REPORT), trainer, &summary, &gallery)?;
     Ok(summary)
-}
-
-/// World-to-camera of `orbit` (a camera-frame orbit) after the scene camera `base`.
-fn compose(orbit: &PinholeCamera, base: &PinholeCamera) -> PinholeCamera {
-    PinholeCamera {
-        rotation: orbit.rotation * base.rotation,
-        translation: orbit.rotation * base.translation + orbit.translation,
-        ..*base
-    }
 }
 
 /// The hands and camera the trainer was built from.
@@ -652,20 +634,7 @@ pub fn training_camera(
     scene: &SynthScene,
     config: &TrainConfig,
 ) -> Result<PinholeCamera, BittError> {
-    let size = config.nets.image_size;
-    let input = ImageInput {
-        image: vec![
-            0.0;
-            3 * scene.given.camera.width as usize * scene.given.camera.height as usize
-        ],
-        mask: None,
-        camera: scene.given.camera,
-    };
-    if input.size() == [size, size] {
-        Ok(input.camera)
-    } else {
-        Ok(input.fit_square(None, size)?.camera)
-    }
+    crate::input::fit_camera(&scene.given.camera, None, config.nets.image_size)
 }
 
 /// A trained avatar read back from a run folder: no networks needed to render it.
@@ -807,17 +776,7 @@ impl SavedAvatar {
             .flat_map(|h| h.vertices)
             .collect();
         let center = all.iter().copied().sum::<DVec3>() / all.len().max(1) as f64;
-        let orbit = orbit_camera(
-            &PinholeCamera {
-                rotation: DMat3::IDENTITY,
-                translation: DVec3::ZERO,
-                ..self.camera
-            },
-            center,
-            yaw,
-            pitch,
-        );
-        hands.camera = compose(&orbit, &self.camera);
+        hands.camera = orbit_camera(&self.camera, center, yaw, pitch);
         Ok(hands)
     }
 }
