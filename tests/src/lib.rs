@@ -1,5 +1,7 @@
 //! Cross-crate tests of the BiTT workspace, and the fixture builders they share: a pickle
-//! writer that emits files with the exact structure of MANO's, and a deterministic RNG.
+//! writer that emits files with the exact structure of MANO's, a deterministic RNG, and
+//! real-data fixtures (annotation pickle + image, a miniature InterHand2.6M folder).
 
 pub mod pickle_writer;
+pub mod real_fixture;
 pub mod rng;

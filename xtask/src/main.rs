@@ -9,6 +9,8 @@
 //! - `pose-hands`, `convert-mano`, `texture`, `convert-html`, `render` ARGS: forwarded to
 //!   `bitt`.
 //! - `synth [ARGS]`: synthetic scenes (default: the 24-scene benchmark), forwarded to `bitt`.
+//! - `metrics A.png B.png [--mask M] [--lpips W]`: one pair's image metrics (JSON), and
+//!   `convert-lpips --lin vgg.pth [--vgg vgg16-397923af.pth]`: LPIPS weights; forwarded.
 //! - `fuzz [--seconds N]`: fuzz the pickle reader with cargo-fuzz.
 //! - `nets [--preset P]`: the networks' parameter counts and output shapes (JSON).
 //! - `bench btr|albedo|nets [--preset P]`: burn vs PyTorch timings, side by side.
@@ -397,13 +399,15 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some((cmd, rest)) = args.split_first() else {
         bail!(
-            "usage: cargo xtask <demo|test|e2e|train-scene|render-avatar|pose-hands|convert-mano|texture|convert-html|render|synth|fuzz|bench> [ARGS]"
+            "usage: cargo xtask <demo|test|e2e|train-scene|render-avatar|eval|eval-merge|metrics|convert-lpips|pose-hands|convert-mano|texture|convert-html|render|synth|fuzz|bench> [ARGS]"
         );
     };
     match cmd.as_str() {
         "demo" => bitt(&[&["demo".to_string()], rest].concat()),
         "pose-hands" | "convert-mano" | "texture" | "convert-html" | "render" | "train-scene"
-        | "render-avatar" | "synth" => bitt(&args),
+        | "render-avatar" | "synth" | "eval" | "eval-merge" | "metrics" | "convert-lpips" => {
+            bitt(&args)
+        }
         "test" => {
             let status = cargo()
                 .args(["test", "--workspace", "--release"])

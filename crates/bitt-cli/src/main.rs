@@ -7,6 +7,8 @@ mod backend_check;
 mod bench_render;
 mod demo;
 mod device;
+mod eval;
+mod metrics;
 mod nets;
 mod pose_hands;
 mod render;
@@ -57,6 +59,11 @@ enum Command {
     Demo(demo::DemoArgs),
     /// Print the four networks' parameter counts and output shapes at a preset (JSON).
     Nets(nets::NetsArgs),
+    /// L1, PSNR, SSIM, MS-SSIM and LPIPS of one image pair (JSON; LPIPS null without weights).
+    Metrics(metrics::MetricsArgs),
+    /// Convert the `lpips` package's VGG weights (vgg.pth + torchvision's VGG16) to the
+    /// safetensors file LPIPS reads (no Python needed).
+    ConvertLpips(metrics::ConvertLpipsArgs),
     /// Time forward + backward of BTR or the albedo U-Net (JSON; `cargo xtask bench`).
     BenchNets(nets::BenchNetsArgs),
     /// Render both hands of a scene with a UV texture under a point light; optionally unwrap
@@ -68,6 +75,12 @@ enum Command {
     /// Train BiTT on one scene (default: the built-in demo scene) and write the run folder:
     /// textures, light, renders, avatar.glb, metrics and report.html.
     TrainScene(train_scene::TrainSceneArgs),
+    /// The paper's evaluation on the synthetic benchmark: every method trained per scene,
+    /// scored on the input view, novel views and poses and in texture space, both mesh
+    /// settings; writes results.json, results.md (the paper's tables) and contact sheets.
+    Eval(eval::EvalArgs),
+    /// Combine the scene results of `bitt eval` shards into results.json and results.md.
+    EvalMerge(eval::MergeArgs),
     /// Render a trained run's avatar at another view (`--view AZ,EL`), pose or light.
     RenderAvatar(render_avatar::RenderAvatarArgs),
     /// Time the renderer's stages forward and backward (JSON; `cargo xtask bench render`).
@@ -102,9 +115,13 @@ fn main() -> Result<()> {
         Command::Synth(args) => synth::run(&args),
         Command::TrainScene(args) => train_scene::run(&args),
         Command::RenderAvatar(args) => render_avatar::run(&args),
+        Command::Eval(args) => eval::run(&args),
+        Command::EvalMerge(args) => eval::merge_cmd(&args),
         Command::BenchRender(args) => bench_render::run(&args),
         Command::ImageDiff { a, b } => render::image_diff(&a, &b),
         Command::Nets(args) => nets::run(&args),
+        Command::Metrics(args) => metrics::run(&args),
+        Command::ConvertLpips(args) => metrics::convert(&args),
         Command::BenchNets(args) => nets::bench(&args),
     }
 }

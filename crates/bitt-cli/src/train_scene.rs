@@ -1,4 +1,5 @@
-//! `bitt train-scene`: train BiTT on one scene and write the run folder (the main job).
+//! `bitt train-scene`: train BiTT on one scene (synthetic, or real data: an image with its
+//! annotation pickle, or an InterHand2.6M scene) and write the run folder (the main job).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -6,10 +7,19 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
+use std::sync::OnceLock;
+
 use anyhow::{Context, Result, bail};
 use bitt::checkpoint::Checkpoint;
+use bitt::real::{
+    HandSource, PriorSource, RealInput, RealScene, RealScores, annotation_setup, interhand_setup,
+    score_real,
+};
 use bitt::run::{files, synthetic_trainer, texture_prior, write_run};
-use bitt::{Observer, Progress, TrainConfig};
+use bitt::{Observer, Progress, TrainConfig, Trainer};
+use bitt_mesh::interhand::{
+    InterHandDataset, InterHandSelection, PAPER_NOVEL_POSES, PAPER_NOVEL_VIEWS,
+};
 use bitt_nets::Preset;
 use bitt_synth::{SynthConfig, SynthScene};
 
@@ -22,6 +32,47 @@ pub struct TrainSceneArgs {
     /// (and cached) by the synthetic generator.
     #[arg(long)]
     pub scene: Option<PathBuf>,
+    /// Real data: a photograph of two interacting hands (with --annotation). Its annotation's
+    /// camera is for the reference's 256x256 crop (the BiTT demo `NN.jpg`).
+    #[arg(long, requires = "annotation", conflicts_with_all = ["scene", "interhand"])]
+    pub image: Option<PathBuf>,
+    /// Real data: the image's BiTT annotation pickle (the demo `NN.pkl` layout).
+    #[arg(long, requires = "image")]
+    pub annotation: Option<PathBuf>,
+    /// Real data: the InterHand2.6M root; selects a scene (training view, novel views of the
+    /// same frame, novel poses of the same capture; see docs/training.md for the rule).
+    #[arg(long, conflicts_with = "scene")]
+    pub interhand: Option<PathBuf>,
+    /// InterHand2.6M split (with --interhand).
+    #[arg(long, requires = "interhand")]
+    pub split: Option<String>,
+    /// InterHand2.6M capture id (default: the smallest with a usable frame).
+    #[arg(long, requires = "interhand")]
+    pub capture: Option<i64>,
+    /// InterHand2.6M training frame index (default: the frame seen by the most cameras).
+    #[arg(long, requires = "interhand")]
+    pub frame: Option<i64>,
+    /// InterHand2.6M training camera name (default: the largest hand box).
+    #[arg(long, requires = "interhand")]
+    pub camera: Option<String>,
+    /// InterHand2.6M: number of novel views scored after training (default: the paper's 8).
+    #[arg(long, requires = "interhand")]
+    pub novel_views: Option<usize>,
+    /// InterHand2.6M: number of novel poses scored after training (default: the paper's 8).
+    #[arg(long, requires = "interhand")]
+    pub novel_poses: Option<usize>,
+    /// Real data: folder with MANO_LEFT / MANO_RIGHT (`.pkl` or `.safetensors`); needs
+    /// --html-dir. Default: the procedural hands.
+    #[arg(long, conflicts_with = "procedural")]
+    pub model_dir: Option<PathBuf>,
+    /// Real data: use the procedural hands (the default without --model-dir).
+    #[arg(long)]
+    pub procedural: bool,
+    /// Real data: HTML's TextureBasis folder (html.safetensors or model_wosr/model.pkl, and
+    /// uvs*.pkl) as the texture prior, resampled to the preset's texture size; needs
+    /// --model-dir. Default: the procedural texture PCA.
+    #[arg(long, requires = "model_dir")]
+    pub html_dir: Option<PathBuf>,
     /// Named configuration.
     #[arg(long, default_value = "quick")]
     pub preset: Preset,
@@ -35,8 +86,9 @@ pub struct TrainSceneArgs {
     #[arg(long, default_value = "runs/train-scene")]
     pub out: PathBuf,
     /// Continue the run in this folder exactly where its last checkpoint left it (its
-    /// `config.json` and scene are used; other options except --iterations are ignored).
-    #[arg(long, conflicts_with_all = ["scene", "out"])]
+    /// `config.json` and scene, or for real data its `input.json` and `input/` images, are
+    /// used; other options except --iterations are ignored).
+    #[arg(long, conflicts_with_all = ["scene", "out", "image", "interhand"])]
     pub resume: Option<PathBuf>,
     /// Cache folder for the demo scene and the fitted texture PCA.
     #[arg(long, default_value = "runs/cache")]
@@ -98,27 +150,202 @@ fn scene_config(config: &TrainConfig) -> SynthConfig {
     }
 }
 
+/// The Ctrl-C flag, its handler installed once per process (tests run several trainings).
+fn stop_flag() -> Result<Arc<AtomicBool>> {
+    static FLAG: OnceLock<Result<Arc<AtomicBool>, String>> = OnceLock::new();
+    let flag = FLAG.get_or_init(|| {
+        let flag = Arc::new(AtomicBool::new(false));
+        let stop = flag.clone();
+        // A second Ctrl-C while saving is ignored: the checkpoint write is atomic anyway.
+        ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst))
+            .map(|()| flag)
+            .map_err(|e| e.to_string())
+    });
+    match flag {
+        Ok(f) => {
+            f.store(false, Ordering::SeqCst);
+            Ok(f.clone())
+        }
+        Err(e) => bail!("installing the Ctrl-C handler: {e}"),
+    }
+}
+
+/// What a run trains on.
+enum Input {
+    /// A synthetic scene (ground truth known).
+    Synthetic(Box<SynthScene>),
+    /// Real data: the record kept in the run folder and the prepared views.
+    Real(Box<RealInput>, Box<RealScene>),
+}
+
+/// The hands and prior the real-data options ask for.
+fn real_sources(args: &TrainSceneArgs) -> (HandSource, PriorSource) {
+    let hands = match &args.model_dir {
+        Some(dir) => HandSource::Mano { dir: dir.clone() },
+        None => HandSource::Procedural,
+    };
+    let prior = match &args.html_dir {
+        Some(dir) => PriorSource::Html { dir: dir.clone() },
+        None => PriorSource::Procedural,
+    };
+    (hands, prior)
+}
+
+/// A fresh run's trainer and input; nothing is written.
+fn fresh(
+    args: &TrainSceneArgs,
+    config: TrainConfig,
+    device: &burn::tensor::Device,
+) -> Result<(Trainer, Input)> {
+    let cache = Some(args.cache.as_path());
+    let real = args.image.is_some() || args.interhand.is_some();
+    if !real && (args.model_dir.is_some() || args.html_dir.is_some()) {
+        bail!(
+            "--model-dir and --html-dir apply to real data: give --image IMG --annotation PKL \
+             or --interhand ROOT"
+        );
+    }
+    let (hands, prior) = real_sources(args);
+    if let (Some(image), Some(annotation)) = (&args.image, &args.annotation) {
+        eprintln!(
+            "real data: {} with {} ({} hands, {} texture prior)",
+            image.display(),
+            annotation.display(),
+            if args.model_dir.is_some() {
+                "MANO"
+            } else {
+                "procedural"
+            },
+            if args.html_dir.is_some() {
+                "HTML"
+            } else {
+                "procedural PCA"
+            },
+        );
+        let setup = annotation_setup(image, annotation, &hands, &prior, config, cache, device)
+            .with_context(|| {
+                format!(
+                    "real data --image {} --annotation {}",
+                    image.display(),
+                    annotation.display()
+                )
+            })?;
+        return Ok((
+            setup.trainer,
+            Input::Real(Box::new(setup.input), Box::new(setup.scene)),
+        ));
+    }
+    if let Some(root) = &args.interhand {
+        let split = args.split.as_deref().unwrap_or("test");
+        eprintln!(
+            "reading InterHand2.6M {split} annotations below {}",
+            root.display()
+        );
+        let dataset = InterHandDataset::open(root, split)?;
+        eprintln!("InterHand2.6M {split}: {}", dataset.counts);
+        let selection = InterHandSelection {
+            capture: args.capture,
+            frame: args.frame,
+            camera: args.camera.clone(),
+            novel_views: args.novel_views.unwrap_or(PAPER_NOVEL_VIEWS),
+            novel_poses: args.novel_poses.unwrap_or(PAPER_NOVEL_POSES),
+        };
+        let scene = dataset.select(&selection)?;
+        eprintln!(
+            "selected capture {}, frame {}, camera {} ({} novel views, {} novel poses)",
+            scene.capture,
+            scene.train.entry.frame_idx,
+            scene.train.entry.camera,
+            scene.novel_views.len(),
+            scene.novel_poses.len()
+        );
+        let setup = interhand_setup(
+            &scene,
+            &dataset.paths,
+            &hands,
+            &prior,
+            config,
+            cache,
+            device,
+        )?;
+        return Ok((
+            setup.trainer,
+            Input::Real(Box::new(setup.input), Box::new(setup.scene)),
+        ));
+    }
+    let scene = match &args.scene {
+        Some(dir) => SynthScene::read(dir).with_context(|| format!("--scene {}", dir.display()))?,
+        None => {
+            eprintln!(
+                "building the demo scene (synthetic generator, cached in {})",
+                args.cache.display()
+            );
+            bitt_synth::cached_scene(
+                &scene_config(&config),
+                bitt_synth::demo_scene_seed(),
+                &args.cache.join("scenes"),
+                &device.clone().inner(),
+            )?
+        }
+    };
+    eprintln!(
+        "fitting / loading the texture PCA ({} components)",
+        config.texture.components
+    );
+    let pca = texture_prior(&config, cache, &device.clone().inner())?;
+    let trainer = synthetic_trainer(&scene, &config, &pca, device)?;
+    Ok((trainer, Input::Synthetic(Box::new(scene))))
+}
+
+/// A resumed run's trainer (checkpoint restored) and input.
+fn resumed(
+    args: &TrainSceneArgs,
+    dir: &Path,
+    device: &burn::tensor::Device,
+) -> Result<(Trainer, Input)> {
+    let path = dir.join(files::CONFIG);
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("--resume {}: cannot read {}", dir.display(), path.display()))?;
+    let mut config = TrainConfig::from_json(&text, &path)?;
+    if let Some(n) = args.iterations {
+        config.iterations = n;
+        config.validate()?;
+    }
+    let ckpt = dir.join(files::CHECKPOINT);
+    let checkpoint = Checkpoint::load(&ckpt)
+        .with_context(|| format!("--resume {}: no usable checkpoint", dir.display()))?;
+    let cache = Some(args.cache.as_path());
+    let (mut trainer, input) = if RealInput::is_real_run(dir) {
+        let (input, scene, trainer) = RealInput::resume_trainer(dir, config, cache, device)
+            .with_context(|| format!("--resume {}: the run's real input", dir.display()))?;
+        (trainer, Input::Real(Box::new(input), Box::new(scene)))
+    } else {
+        let scene = SynthScene::read(&dir.join(files::SCENE))
+            .with_context(|| format!("--resume {}: the run's scene", dir.display()))?;
+        eprintln!(
+            "fitting / loading the texture PCA ({} components)",
+            config.texture.components
+        );
+        let pca = texture_prior(&config, cache, &device.clone().inner())?;
+        let trainer = synthetic_trainer(&scene, &config, &pca, device)?;
+        (trainer, Input::Synthetic(Box::new(scene)))
+    };
+    trainer.restore(&checkpoint)?;
+    eprintln!(
+        "resuming at iteration {} of {}",
+        checkpoint.iteration, trainer.config.iterations
+    );
+    Ok((trainer, input))
+}
+
 /// `bitt train-scene`.
 pub fn run(args: &TrainSceneArgs) -> Result<()> {
     let started = Instant::now();
     let device = args.device.device()?.autodiff();
-    let (out, config, scene, resume) = match &args.resume {
+    let (out, mut trainer, input) = match &args.resume {
         Some(dir) => {
-            let path = dir.join(files::CONFIG);
-            let text = std::fs::read_to_string(&path).with_context(|| {
-                format!("--resume {}: cannot read {}", dir.display(), path.display())
-            })?;
-            let mut config = TrainConfig::from_json(&text, &path)?;
-            if let Some(n) = args.iterations {
-                config.iterations = n;
-                config.validate()?;
-            }
-            let scene = SynthScene::read(&dir.join(files::SCENE))
-                .with_context(|| format!("--resume {}: the run's scene", dir.display()))?;
-            let ckpt = dir.join(files::CHECKPOINT);
-            let checkpoint = Checkpoint::load(&ckpt)
-                .with_context(|| format!("--resume {}: no usable checkpoint", dir.display()))?;
-            (dir.clone(), config, scene, Some(checkpoint))
+            let (trainer, input) = resumed(args, dir, &device)?;
+            (dir.clone(), trainer, input)
         }
         None => {
             if args.out.join(files::CHECKPOINT).exists() {
@@ -136,63 +363,34 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
                 config.seed = s;
             }
             config.validate()?;
-            let scene = match &args.scene {
-                Some(dir) => {
-                    SynthScene::read(dir).with_context(|| format!("--scene {}", dir.display()))?
-                }
-                None => {
-                    eprintln!(
-                        "building the demo scene (synthetic generator, cached in {})",
-                        args.cache.display()
-                    );
-                    bitt_synth::cached_scene(
-                        &scene_config(&config),
-                        bitt_synth::demo_scene_seed(),
-                        &args.cache.join("scenes"),
-                        &device.clone().inner(),
-                    )?
-                }
-            };
-            (args.out.clone(), config, scene, None)
+            // Every input is read and checked (and the trainer built) before the run folder
+            // is created, so a bad input leaves nothing behind.
+            let (trainer, input) = fresh(args, config, &device)?;
+            std::fs::create_dir_all(&args.out)
+                .with_context(|| format!("creating {}", args.out.display()))?;
+            bitt_mesh::export::write_atomically(
+                &args.out.join(files::CONFIG),
+                serde_json::to_string_pretty(&trainer.config)?.as_bytes(),
+            )?;
+            match &input {
+                Input::Synthetic(scene) => scene.write(&args.out.join(files::SCENE))?,
+                Input::Real(record, scene) => record.write(&args.out, scene)?,
+            }
+            (args.out.clone(), trainer, input)
         }
     };
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-    if resume.is_none() {
-        bitt_mesh::export::write_atomically(
-            &out.join(files::CONFIG),
-            serde_json::to_string_pretty(&config)?.as_bytes(),
-        )?;
-        scene.write(&out.join(files::SCENE))?;
-    }
-    eprintln!(
-        "fitting / loading the texture PCA ({} components)",
-        config.texture.components
-    );
-    let pca = texture_prior(&config, Some(&args.cache), &device.clone().inner())?;
-    let mut trainer = synthetic_trainer(&scene, &config, &pca, &device)?;
-    if let Some(c) = &resume {
-        trainer.restore(c)?;
-        eprintln!(
-            "resuming at iteration {} of {}",
-            c.iteration, config.iterations
-        );
-    }
+    let config = trainer.config.clone();
     let [lv, rv] = trainer.view.visible_fraction();
     eprintln!(
-        "training {} iterations ({} preset, {} texels per hand, visible {:.0}% / {:.0}%)",
+        "training {} iterations ({} preset, {} texels per hand, {} texture components, visible {:.0}% / {:.0}%)",
         config.iterations,
         config.preset,
         trainer.assets.num_texels(),
+        config.nets.html.coefficients_per_hand,
         100.0 * lv,
         100.0 * rv
     );
-    let stop = Arc::new(AtomicBool::new(false));
-    {
-        let stop = stop.clone();
-        // A second Ctrl-C while saving is ignored: the checkpoint write is atomic anyway.
-        ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst))
-            .context("installing the Ctrl-C handler")?;
-    }
+    let stop = stop_flag()?;
     let mut bar = Bar {
         started: Instant::now(),
         done_before: trainer.iteration,
@@ -210,12 +408,34 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
         r => r?,
     }
     eprintln!("writing results");
-    let summary = write_run(&out, &trainer, Some(&scene), args.turntable)?;
-    print_summary(&out, &summary, started.elapsed().as_secs_f64());
+    let synthetic = match &input {
+        Input::Synthetic(scene) => Some(scene.as_ref()),
+        Input::Real(..) => None,
+    };
+    let summary = write_run(&out, &trainer, synthetic, args.turntable)?;
+    let real_scores = match &input {
+        Input::Real(_, scene)
+            if !(scene.novel_views.is_empty() && scene.novel_poses.is_empty()) =>
+        {
+            let scores = score_real(&trainer, scene)?;
+            bitt::outputs::write_json(&out.join(REAL_SCORES), &scores)?;
+            Some(scores)
+        }
+        _ => None,
+    };
+    print_summary(
+        &out,
+        &summary,
+        real_scores.as_ref(),
+        started.elapsed().as_secs_f64(),
+    );
     Ok(())
 }
 
-fn print_summary(out: &Path, s: &bitt::run::RunSummary, wall: f64) {
+/// Scores of a real multi-view run against the photographs of its novel views and poses.
+pub const REAL_SCORES: &str = "real_scores.json";
+
+fn print_summary(out: &Path, s: &bitt::run::RunSummary, real: Option<&RealScores>, wall: f64) {
     println!(
         "results in {}/ (open {}/report.html)",
         out.display(),
@@ -225,25 +445,215 @@ fn print_summary(out: &Path, s: &bitt::run::RunSummary, wall: f64) {
         "{} iterations, {:.1} s training, {:.1} s wall clock; input-view PSNR {:.2} dB",
         s.iterations, s.seconds, wall, s.input_psnr
     );
-    if let Some(g) = &s.synthetic {
-        for (name, m) in [
-            ("novel views", &g.novel_views),
-            ("novel poses", &g.novel_poses),
-        ] {
+    let means = match (&s.synthetic, real) {
+        (Some(g), _) => Some((&g.novel_views, &g.novel_poses)),
+        (None, Some(r)) => Some((&r.novel_views, &r.novel_poses)),
+        _ => None,
+    };
+    if let Some((views, poses)) = means {
+        let against = if real.is_some() { " (photographs)" } else { "" };
+        for (name, m) in [("novel views", views), ("novel poses", poses)] {
             if let Some(m) = m {
                 println!(
-                    "{name} ({}): PSNR fine {:.2} dB vs coarse {:.2} dB; SSIM fine {:.4} vs coarse {:.4}",
+                    "{name} ({}){against}: PSNR fine {:.2} dB vs coarse {:.2} dB; SSIM fine {:.4} vs coarse {:.4}",
                     m.count, m.fine.psnr, m.coarse.psnr, m.fine.ssim, m.coarse.ssim
                 );
             }
         }
-        if let Some(t) = &g.texture {
-            let f = |v: Option<f64>| v.map_or("n/a".to_string(), |v| format!("{v:.4}"));
-            println!(
-                "texture L1 on texels invisible in the input: fine {} vs coarse {}",
-                f(t.fine_invisible),
-                f(t.coarse_invisible)
-            );
+    }
+    if let Some(t) = s.synthetic.as_ref().and_then(|g| g.texture.as_ref()) {
+        let f = |v: Option<f64>| v.map_or("n/a".to_string(), |v| format!("{v:.4}"));
+        println!(
+            "texture L1 on texels invisible in the input: fine {} vs coarse {}",
+            f(t.fine_invisible),
+            f(t.coarse_invisible)
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bitt_tests::real_fixture::{AnnotationOptions, scratch, write_annotation, write_image};
+    use clap::Parser;
+
+    #[derive(Debug, Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: TrainSceneArgs,
+    }
+
+    #[derive(Debug, Parser)]
+    struct AvatarCli {
+        #[command(flatten)]
+        args: crate::render_avatar::RenderAvatarArgs,
+    }
+
+    fn args(extra: &[&str]) -> TrainSceneArgs {
+        let mut all = vec!["bitt", "--preset", "tiny", "--turntable", "2"];
+        all.extend_from_slice(extra);
+        Cli::try_parse_from(all).unwrap().args
+    }
+
+    fn s(p: &Path) -> &str {
+        p.to_str().unwrap()
+    }
+
+    /// `train-scene --image --annotation --procedural`, then `--resume` and `render-avatar`
+    /// in the training pose, another annotation's pose, a procedural pose and another view.
+    #[test]
+    fn real_pair_trains_resumes_and_renders() {
+        let dir = scratch("cli-real");
+        let (img, pkl, other) = (dir.join("01.jpg"), dir.join("01.pkl"), dir.join("02.pkl"));
+        write_image(&img, 256, 256, None);
+        write_annotation(&pkl, AnnotationOptions::default());
+        write_annotation(
+            &other,
+            AnnotationOptions {
+                turn: -0.3,
+                ..AnnotationOptions::default()
+            },
+        );
+        let (out, cache) = (dir.join("run"), dir.join("cache"));
+        let common = [
+            "--image",
+            s(&img),
+            "--annotation",
+            s(&pkl),
+            "--procedural",
+            "--cache",
+            s(&cache),
+            "--out",
+            s(&out),
+        ];
+        let mut first = common.to_vec();
+        first.extend(["--iterations", "2"]);
+        run(&args(&first)).unwrap();
+        for f in [
+            "config.json",
+            "input.json",
+            "input/images.safetensors",
+            "checkpoint.safetensors",
+            "report.html",
+            "avatar.glb",
+            "renders/turntable.png",
+        ] {
+            assert!(out.join(f).is_file(), "{f} missing");
         }
+        assert!(!out.join("scene").exists());
+        // An existing run is refused; --resume continues it.
+        let e = format!("{:#}", run(&args(&first)).unwrap_err());
+        assert!(e.contains("--resume"), "{e}");
+        let resume = Cli::try_parse_from([
+            "bitt",
+            "--resume",
+            s(&out),
+            "--iterations",
+            "3",
+            "--cache",
+            s(&cache),
+            "--turntable",
+            "0",
+        ])
+        .unwrap()
+        .args;
+        run(&resume).unwrap();
+        let metrics: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap())
+                .unwrap();
+        assert_eq!(metrics["history"].as_array().unwrap().len(), 3);
+        // render-avatar in several poses.
+        let render = |extra: &[&str], name: &str| {
+            let png = dir.join(name);
+            let mut all = vec!["bitt", "--run", s(&out), "--out", s(&png)];
+            all.extend_from_slice(extra);
+            crate::render_avatar::run(&AvatarCli::try_parse_from(all).unwrap().args)?;
+            anyhow::Ok(png)
+        };
+        let (w, h) = image::image_dimensions(render(&[], "train.png").unwrap()).unwrap();
+        assert_eq!((w, h), (32, 32));
+        render(&["--pose", s(&other)], "pose.png").unwrap();
+        render(
+            &["--procedural-pose", "palm-on-back", "--view", "30,-10"],
+            "proc.png",
+        )
+        .unwrap();
+        let big = render(&["--procedural-pose", "clasp", "--size", "96"], "big.png").unwrap();
+        assert_eq!(image::image_dimensions(big).unwrap(), (96, 96));
+        let e = format!(
+            "{:#}",
+            render(&["--novel-pose", "0"], "np.png").unwrap_err()
+        );
+        assert!(e.contains("single annotation"), "{e}");
+        let e = format!(
+            "{:#}",
+            render(&["--procedural-pose", "wave"], "bad.png").unwrap_err()
+        );
+        assert!(e.contains("wave") && e.contains("clasp"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// Bad real inputs fail before the run folder is created.
+    #[test]
+    fn bad_real_inputs_write_nothing() {
+        let dir = scratch("cli-bad");
+        let (img, pkl) = (dir.join("01.jpg"), dir.join("01.pkl"));
+        write_image(&img, 128, 128, None);
+        write_annotation(&pkl, AnnotationOptions::default());
+        let nan = dir.join("nan.pkl");
+        write_annotation(
+            &nan,
+            AnnotationOptions {
+                nan: true,
+                ..AnnotationOptions::default()
+            },
+        );
+        let (out, cache) = (dir.join("run"), dir.join("cache"));
+        let attempt = |image: &Path, annotation: &Path, extra: &[&str]| {
+            let mut all = vec![
+                "--image",
+                s(image),
+                "--annotation",
+                s(annotation),
+                "--cache",
+                s(&cache),
+                "--out",
+                s(&out),
+            ];
+            all.extend_from_slice(extra);
+            format!("{:#}", run(&args(&all)).unwrap_err())
+        };
+        let e = attempt(&img, &pkl, &[]);
+        assert!(e.contains("01.jpg") && e.contains("128x128"), "{e}");
+        let e = attempt(&img, &nan, &[]);
+        assert!(e.contains("nan.pkl") && e.contains("NaN"), "{e}");
+        let e = attempt(&dir.join("missing.jpg"), &pkl, &[]);
+        assert!(e.contains("missing.jpg"), "{e}");
+        let e = attempt(&img, &dir.join("missing.pkl"), &[]);
+        assert!(e.contains("missing.pkl"), "{e}");
+        let e = attempt(&img, &pkl, &["--model-dir", s(&dir.join("mano"))]);
+        assert!(e.contains("HTML"), "{e}");
+        assert!(!out.exists(), "a failed run created {}", out.display());
+        // Real-data options need real data; --image needs --annotation.
+        let e = format!(
+            "{:#}",
+            run(&args(&["--model-dir", "x", "--out", s(&out)])).unwrap_err()
+        );
+        assert!(e.contains("real data"), "{e}");
+        assert!(Cli::try_parse_from(["bitt", "--image", s(&img)]).is_err());
+        assert!(
+            Cli::try_parse_from([
+                "bitt",
+                "--image",
+                s(&img),
+                "--annotation",
+                s(&pkl),
+                "--scene",
+                "x"
+            ])
+            .is_err()
+        );
+        assert!(Cli::try_parse_from(["bitt", "--capture", "0"]).is_err());
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

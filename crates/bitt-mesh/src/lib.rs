@@ -6,6 +6,7 @@
 //! - [`procedural`]: the license-free hand model this project generates itself.
 //! - [`camera`]: pinhole and orthographic cameras.
 //! - [`annotation`]: BiTT/InterHand annotation pickles and InterHand2.6M JSON.
+//! - [`interhand`]: the InterHand2.6M dataset reader and the paper's scene selection.
 //! - [`export`]: OBJ and glTF 2.0 binary writers.
 //!
 //! This crate knows nothing of tensors, networks or textures beyond a UV layout, and never
@@ -15,6 +16,7 @@ pub mod annotation;
 pub mod camera;
 pub mod error;
 pub mod export;
+pub mod interhand;
 pub mod lbs;
 pub mod mano;
 pub mod model;

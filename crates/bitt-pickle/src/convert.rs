@@ -8,8 +8,9 @@
 use std::collections::HashMap;
 
 use crate::error::PickleErrorKind;
-use crate::machine::{Class, H, Machine, Obj, latin1};
+use crate::machine::{Class, H, Machine, Obj, TensorSpec, latin1};
 use crate::numpy::{self, shape_str};
+use crate::torch;
 use crate::value::{ArrayData, CscMatrix, NdArray, Value};
 
 /// Deepest nesting of containers (and chumpy / scipy objects) accepted.
@@ -21,6 +22,8 @@ pub(crate) struct Converter<'m, 'a> {
     m: &'m Machine<'a>,
     /// Values and array elements that may still be produced.
     budget: usize,
+    /// The storages of a torch checkpoint, by key (empty for other pickles).
+    storages: Option<&'m HashMap<String, &'m [u8]>>,
 }
 
 #[derive(Hash, PartialEq, Eq)]
@@ -42,7 +45,24 @@ fn dict_key(v: &Value) -> Option<DictKey> {
 
 impl<'m, 'a> Converter<'m, 'a> {
     pub(crate) fn new(m: &'m Machine<'a>, budget: usize) -> Self {
-        Converter { m, budget }
+        Converter {
+            m,
+            budget,
+            storages: None,
+        }
+    }
+
+    /// A converter for a torch checkpoint's object pickle, with its storages by key.
+    pub(crate) fn with_storages(
+        m: &'m Machine<'a>,
+        budget: usize,
+        storages: &'m HashMap<String, &'m [u8]>,
+    ) -> Self {
+        Converter {
+            m,
+            budget,
+            storages: Some(storages),
+        }
     }
 
     fn offset(&self, h: H) -> usize {
@@ -142,7 +162,47 @@ impl<'m, 'a> Converter<'m, 'a> {
                 Class::Ch => Value::Array(self.ch(h, state, depth)?),
                 Class::Select => Value::Array(self.select(h, state, depth)?),
             },
+            Obj::Storage { dtype, .. } => {
+                return self.bad(
+                    h,
+                    format!(
+                        "a bare {} (not inside a tensor) cannot be represented as a value",
+                        dtype.storage_name()
+                    ),
+                );
+            }
+            Obj::Tensor(spec) => Value::Array(self.tensor(h, spec)?),
         })
+    }
+
+    #[inline(never)]
+    fn tensor(&mut self, h: H, spec: &TensorSpec) -> R<NdArray> {
+        let Obj::Storage { dtype, key, numel } = self.obj(spec.storage)? else {
+            return self.bad(h, "tensor storage is not a storage");
+        };
+        let bytes = self
+            .storages
+            .and_then(|s| s.get(key))
+            .copied()
+            .ok_or_else(|| {
+                (
+                    self.offset(h),
+                    PickleErrorKind::BadArgument(format!(
+                        "the checkpoint holds no data for storage {key:?}"
+                    )),
+                )
+            })?;
+        let count = numpy::element_count(&spec.shape).map_err(|k| (self.offset(h), k))?;
+        self.charge(h, count)?;
+        torch::tensor_data(
+            *dtype,
+            bytes,
+            *numel,
+            spec.offset,
+            &spec.shape,
+            &spec.stride,
+        )
+        .map_err(|k| (self.offset(h), k))
     }
 
     fn values(&mut self, items: &[H], depth: usize) -> R<Vec<Value>> {

@@ -15,6 +15,10 @@
 //!   build the above, and `_codecs.encode(str, 'latin1')`, `bytes()` and `bytearray(...)`,
 //!   which is how Python 3 writes bytes in protocols below 3 (latin-1 only).
 //!
+//! Torch checkpoints (`torch.save` files, zip or legacy format) are read by [`load_torch`],
+//! which adds persistent storage ids and the few torch globals that rebuild tensors (see
+//! its module docs); [`from_bytes`] and [`from_path`] refuse those.
+//!
 //! Any other global is refused with [`PickleErrorKind::UnsupportedGlobal`]. Sizes read from
 //! the input are checked against the input length before anything is allocated, the
 //! stack, memo and object count are capped, nesting is limited to [`MAX_DEPTH`] levels,
@@ -38,6 +42,7 @@ mod convert;
 mod error;
 mod machine;
 mod numpy;
+mod torch;
 mod value;
 
 #[cfg(test)]
@@ -45,6 +50,7 @@ mod tests;
 
 pub use convert::MAX_DEPTH;
 pub use error::{PickleError, PickleErrorKind};
+pub use torch::{load_torch, torch_from_bytes};
 pub use value::{ArrayData, CscMatrix, MAX_DENSE_ELEMENTS, NdArray, Value};
 
 /// Reads a pickle from memory. `source` names it in error messages (usually a path).

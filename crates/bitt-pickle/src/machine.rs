@@ -11,6 +11,7 @@ use std::rc::Rc;
 
 use crate::error::PickleErrorKind;
 use crate::numpy::{self, Dtype};
+use crate::torch::TorchDtype;
 
 type R<T> = Result<T, PickleErrorKind>;
 
@@ -63,9 +64,31 @@ pub(crate) enum Global {
     CodecsEncode,
     BytesType,
     ByteArrayType,
+    /// `torch._utils._rebuild_tensor_v2` (torch checkpoints only).
+    RebuildTensorV2,
+    /// `torch._utils._rebuild_tensor` (torch checkpoints only).
+    RebuildTensor,
+    /// `torch._utils._rebuild_parameter` (torch checkpoints only).
+    RebuildParameter,
+    /// `torch.FloatStorage` and the other typed storages (torch checkpoints only).
+    Storage(TorchDtype),
+    /// `collections.OrderedDict` (torch checkpoints only).
+    OrderedDict,
 }
 
 impl Global {
+    /// The globals of torch checkpoints, understood only by [`Machine::new_torch`].
+    fn resolve_torch(module: &str, name: &str) -> Option<Global> {
+        Some(match (module, name) {
+            ("torch._utils", "_rebuild_tensor_v2") => Global::RebuildTensorV2,
+            ("torch._utils", "_rebuild_tensor") => Global::RebuildTensor,
+            ("torch._utils", "_rebuild_parameter") => Global::RebuildParameter,
+            ("torch", storage) => Global::Storage(TorchDtype::from_storage_name(storage)?),
+            ("collections", "OrderedDict") => Global::OrderedDict,
+            _ => return None,
+        })
+    }
+
     fn resolve(module: &str, name: &str) -> Option<Global> {
         Some(match (module, name) {
             ("numpy.core.multiarray" | "numpy._core.multiarray", "_reconstruct") => {
@@ -102,6 +125,11 @@ impl Global {
             Global::CodecsEncode => "_codecs.encode",
             Global::BytesType => "builtins.bytes",
             Global::ByteArrayType => "builtins.bytearray",
+            Global::RebuildTensorV2 => "torch._utils._rebuild_tensor_v2",
+            Global::RebuildTensor => "torch._utils._rebuild_tensor",
+            Global::RebuildParameter => "torch._utils._rebuild_parameter",
+            Global::Storage(d) => d.storage_name(),
+            Global::OrderedDict => "collections.OrderedDict",
         }
     }
 }
@@ -157,6 +185,24 @@ pub(crate) enum Obj<'a> {
         class: Class,
         state: Vec<H>,
     },
+    /// A torch storage named by a persistent id (torch checkpoints only): its bytes live
+    /// outside the pickle, under `key`.
+    Storage {
+        dtype: TorchDtype,
+        key: String,
+        numel: usize,
+    },
+    /// A torch tensor: a strided view of a [`Obj::Storage`] (torch checkpoints only).
+    Tensor(Box<TensorSpec>),
+}
+
+/// A validated strided view of a storage (every element lies inside the storage).
+#[derive(Debug, Clone)]
+pub(crate) struct TensorSpec {
+    pub(crate) storage: H,
+    pub(crate) offset: usize,
+    pub(crate) shape: Vec<usize>,
+    pub(crate) stride: Vec<usize>,
 }
 
 impl Obj<'_> {
@@ -178,6 +224,8 @@ impl Obj<'_> {
             Obj::PendingArray => "ndarray (not yet built)".into(),
             Obj::Array(_) => "ndarray".into(),
             Obj::Instance { class, .. } => class.name().into(),
+            Obj::Storage { dtype, .. } => dtype.storage_name().into(),
+            Obj::Tensor(_) => "torch.Tensor".into(),
         }
     }
 }
@@ -203,6 +251,8 @@ pub(crate) struct Machine<'a> {
     /// Items or bytes that calls may still copy (`set(list)`, latin-1 encodings): bounds
     /// the work of a small input that calls them many times on one large argument.
     copy_budget: Cell<usize>,
+    /// Torch checkpoint mode: persistent ids name storages, and the torch globals are known.
+    torch: bool,
 }
 
 fn bad<T>(msg: impl Into<String>) -> R<T> {
@@ -224,7 +274,38 @@ impl<'a> Machine<'a> {
             marks: Vec::new(),
             memo: HashMap::new(),
             copy_budget: Cell::new(input.len().saturating_mul(4).saturating_add(1 << 18)),
+            torch: false,
         }
+    }
+
+    /// A machine for the pickle of a torch checkpoint (`torch.save`): it also understands
+    /// persistent ids naming storages (`BINPERSID`), `torch._utils._rebuild_tensor_v2`,
+    /// `_rebuild_tensor`, `_rebuild_parameter`, the typed storage classes and
+    /// `collections.OrderedDict`.
+    pub(crate) fn new_torch(input: &'a [u8]) -> Self {
+        Machine {
+            torch: true,
+            ..Machine::new(input)
+        }
+    }
+
+    /// Bytes consumed so far (after [`Machine::run`]: the length of the pickle).
+    pub(crate) fn position(&self) -> usize {
+        self.pos
+    }
+
+    fn global(&self, module: &str, name: &str) -> R<Global> {
+        let g = Global::resolve(module, name).or_else(|| {
+            if self.torch {
+                Global::resolve_torch(module, name)
+            } else {
+                None
+            }
+        });
+        g.ok_or_else(|| PickleErrorKind::UnsupportedGlobal {
+            module: module.to_string(),
+            name: name.to_string(),
+        })
     }
 
     /// Runs to the STOP opcode; returns the handle of the result, or the offset of the
@@ -684,7 +765,7 @@ impl<'a> Machine<'a> {
             b'c' => {
                 let module = self.line_str()?;
                 let name = self.line_str()?;
-                let g = global(module, name)?;
+                let g = self.global(module, name)?;
                 self.new_obj(Obj::Global(g))?;
             }
             0x93 => {
@@ -692,7 +773,7 @@ impl<'a> Machine<'a> {
                 let module = self.pop()?;
                 let name = self.text(name, "STACK_GLOBAL name")?;
                 let module = self.text(module, "STACK_GLOBAL module")?;
-                let g = global(&module, &name)?;
+                let g = self.global(&module, &name)?;
                 self.new_obj(Obj::Global(g))?;
             }
             // REDUCE, NEWOBJ, NEWOBJ_EX, BUILD
@@ -719,6 +800,12 @@ impl<'a> Machine<'a> {
                 let state = self.pop()?;
                 let inst = self.top()?;
                 self.build(inst, state)?;
+            }
+            // BINPERSID: a storage of a torch checkpoint.
+            b'Q' if self.torch => {
+                let pid = self.pop()?;
+                let o = self.persistent_storage(pid)?;
+                self.new_obj(o)?;
             }
             other => return Err(PickleErrorKind::UnknownOpcode(other)),
         }
@@ -967,7 +1054,53 @@ impl<'a> Machine<'a> {
                     state: Vec::new(),
                 })
             }
-            Global::NdArrayType | Global::ObjectType => {
+            Global::RebuildTensorV2 => {
+                // (storage, offset, size, stride, requires_grad, backward_hooks[, metadata])
+                nargs(6..=7)?;
+                Ok(Obj::Tensor(Box::new(self.tensor_spec(args)?)))
+            }
+            Global::RebuildTensor => {
+                nargs(4..=4)?;
+                Ok(Obj::Tensor(Box::new(self.tensor_spec(args)?)))
+            }
+            Global::RebuildParameter => {
+                // (data, requires_grad, backward_hooks): the parameter is its data.
+                nargs(3..=3)?;
+                match self.obj(arg(0)?)? {
+                    Obj::Tensor(t) => Ok(Obj::Tensor(t.clone())),
+                    other => bad(format!(
+                        "_rebuild_parameter of a {}, expected a tensor",
+                        other.type_name()
+                    )),
+                }
+            }
+            Global::OrderedDict => {
+                nargs(0..=1)?;
+                let Some(&items) = args.first() else {
+                    return Ok(Obj::Dict(Vec::new()));
+                };
+                let items = match self.obj(items)? {
+                    Obj::List(v) | Obj::Tuple(v) => v,
+                    other => return bad(format!("OrderedDict() of a {}", other.type_name())),
+                };
+                self.spend(items.len())?;
+                let mut pairs = Vec::with_capacity(items.len());
+                for &item in items {
+                    match self.obj(item)? {
+                        Obj::List(kv) | Obj::Tuple(kv) if kv.len() == 2 => {
+                            pairs.push((kv[0], kv[1]));
+                        }
+                        other => {
+                            return bad(format!(
+                                "OrderedDict() item is a {}, expected a pair",
+                                other.type_name()
+                            ));
+                        }
+                    }
+                }
+                Ok(Obj::Dict(pairs))
+            }
+            Global::NdArrayType | Global::ObjectType | Global::Storage(_) => {
                 bad(format!("{} cannot be called by this reader", g.name()))
             }
         }
@@ -1057,6 +1190,16 @@ impl<'a> Machine<'a> {
                 slot.offset = cur;
                 return Ok(());
             }
+            // Attributes of a torch state dict (an OrderedDict with `_metadata`): dropped.
+            Obj::Dict(_) if self.torch => {
+                return match self.obj(state)? {
+                    Obj::Dict(_) | Obj::None => Ok(()),
+                    other => bad(format!(
+                        "OrderedDict state must be a dict, not a {}",
+                        other.type_name()
+                    )),
+                };
+            }
             other => return bad(format!("BUILD on a {}", other.type_name())),
         };
         let cur = self.cur;
@@ -1064,6 +1207,101 @@ impl<'a> Machine<'a> {
         slot.obj = new;
         slot.offset = cur;
         Ok(())
+    }
+
+    /// The persistent id of a torch storage: `('storage', <typed storage class>, key,
+    /// location, numel)` (zip checkpoints) or the same with a sixth `view_metadata` entry,
+    /// which must be `None` (legacy checkpoints; storage views are not supported).
+    fn persistent_storage(&self, pid: H) -> R<Obj<'a>> {
+        let t = self.tuple_items(pid, "persistent id")?;
+        if !(5..=6).contains(&t.len()) {
+            return bad(format!(
+                "persistent id with {} items (expected a 5- or 6-item storage id)",
+                t.len()
+            ));
+        }
+        let kind = self.text(t[0], "persistent id kind")?;
+        if kind != "storage" {
+            return bad(format!("persistent id of kind {kind:?} (only 'storage')"));
+        }
+        let dtype = match self.obj(t[1])? {
+            Obj::Global(Global::Storage(d)) => *d,
+            Obj::Global(g) => {
+                return bad(format!(
+                    "storage of type {} (only typed storages such as torch.FloatStorage)",
+                    g.name()
+                ));
+            }
+            other => {
+                return bad(format!(
+                    "storage type is a {}, expected a storage class",
+                    other.type_name()
+                ));
+            }
+        };
+        let key = self.text(t[2], "storage key")?;
+        self.text(t[3], "storage location")?;
+        let numel = self.int(t[4], "storage size")?;
+        let numel =
+            usize::try_from(numel).or_else(|_| bad(format!("negative storage size {numel}")))?;
+        if let Some(&view) = t.get(5)
+            && !matches!(self.obj(view)?, Obj::None)
+        {
+            return bad("storage views (legacy view_metadata) are not supported");
+        }
+        Ok(Obj::Storage { dtype, key, numel })
+    }
+
+    /// `_rebuild_tensor(_v2)` arguments `(storage, offset, size, stride, ...)`, checked so
+    /// that every element lies inside the storage.
+    fn tensor_spec(&self, args: &[H]) -> R<TensorSpec> {
+        let [storage, offset, size, stride, ..] = args else {
+            return Err(internal());
+        };
+        let numel = match self.obj(*storage)? {
+            Obj::Storage { numel, .. } => *numel,
+            other => {
+                return bad(format!(
+                    "tensor storage is a {}, expected a persistent storage",
+                    other.type_name()
+                ));
+            }
+        };
+        let offset = self.int(*offset, "tensor storage offset")?;
+        let offset = usize::try_from(offset)
+            .or_else(|_| bad(format!("negative tensor storage offset {offset}")))?;
+        let shape = self.shape(*size, "tensor size")?;
+        let stride = self.shape(*stride, "tensor stride")?;
+        if shape.len() != stride.len() {
+            return bad(format!(
+                "tensor size has {} dimensions but its stride {}",
+                shape.len(),
+                stride.len()
+            ));
+        }
+        if !shape.contains(&0) {
+            let mut last = offset;
+            for (&n, &s) in shape.iter().zip(&stride) {
+                last = (n - 1)
+                    .checked_mul(s)
+                    .and_then(|v| v.checked_add(last))
+                    .ok_or_else(|| PickleErrorKind::TooLarge("tensor extent overflows".into()))?;
+            }
+            if last >= numel {
+                return Err(PickleErrorKind::SizeMismatch(format!(
+                    "tensor of size {} (stride {}, offset {offset}) reaches element {last} of a \
+                     storage of {numel}",
+                    numpy::shape_str(&shape),
+                    numpy::shape_str(&stride)
+                )));
+            }
+        }
+        Ok(TensorSpec {
+            storage: *storage,
+            offset,
+            shape,
+            stride,
+        })
     }
 
     /// ndarray state: `(version, shape, dtype, is_fortran, rawdata)` or the old 4-tuple
@@ -1132,13 +1370,6 @@ impl<'a> Machine<'a> {
         }
         Ok(d)
     }
-}
-
-fn global(module: &str, name: &str) -> R<Global> {
-    Global::resolve(module, name).ok_or_else(|| PickleErrorKind::UnsupportedGlobal {
-        module: module.to_string(),
-        name: name.to_string(),
-    })
 }
 
 fn pairs(vs: Vec<H>) -> R<Vec<(H, H)>> {

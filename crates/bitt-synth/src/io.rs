@@ -32,7 +32,10 @@ use crate::{
 
 /// Version of the generator: part of the cache key and of `scene.json`; bump it whenever the
 /// same configuration and seed would produce a different scene.
-pub const GENERATOR_VERSION: u32 = 1;
+///
+/// - 1: first release.
+/// - 2: personal appearance patches ([`crate::AppearancePatch`]) on both hands.
+pub const GENERATOR_VERSION: u32 = 2;
 
 /// The `format` of `scene.json` and `data.safetensors`.
 const FORMAT: &str = "bitt-synth-scene";

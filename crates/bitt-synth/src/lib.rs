@@ -7,7 +7,9 @@
 //! - **identity**: shape coefficients (betas) of the procedural hand shared by both hands,
 //!   and a skin from the procedural texture generator ([`bitt_texture::generate_texture`] of
 //!   a [`bitt_texture::SkinIdentity`]; *not* sampled from the texture PCA, so the PCA prior
-//!   is imperfect as HTML is for real hands), plus one-sided details ([`texture`]);
+//!   is imperfect as HTML is for real hands), a personal appearance the PCA cannot know
+//!   (patches of uneven tone and redness, the same on both hands) and one-sided details
+//!   ([`texture`]);
 //! - **poses**: interacting two-hand poses of the kinds InterHand2.6M has ([`pose`]);
 //! - **views**: pinhole cameras around the hands, the hands' bounding box filling 72-88% of
 //!   the training image (62-80% of novel views); the training camera is the best of
@@ -55,7 +57,7 @@ pub use pose::PoseFamily;
 pub use render::{HandRenderer, RenderedView, camera_frame_camera};
 pub use sheet::{PANEL, contact_sheet};
 pub use stats::{TexelStats, scene_stats};
-pub use texture::{SkinDetail, TEXTURE_GUTTER, texture_layouts};
+pub use texture::{AppearancePatch, PatchKind, SkinDetail, TEXTURE_GUTTER, texture_layouts};
 pub use views::StudioLight;
 
 /// Perturbation of the meshes given to the method (the paper's "without GT mesh" setting,
@@ -175,6 +177,9 @@ pub struct Identity {
     pub betas: Vec<f64>,
     /// The skin.
     pub skin: SkinIdentity,
+    /// Personal appearance (uneven tone, redness) painted on both hands alike.
+    #[serde(default)]
+    pub appearance: Vec<AppearancePatch>,
     /// One-sided details painted on one hand's texture only.
     pub details: Vec<SkinDetail>,
 }
@@ -268,6 +273,7 @@ mod stream {
     pub const NOVEL_POSES: u64 = 7;
     pub const DEGRADE: u64 = 8;
     pub const MESH_NOISE: u64 = 9;
+    pub const APPEARANCE: u64 = 10;
 }
 
 /// Generates the scene of `seed` with `config`, rendering on `device`.
@@ -292,8 +298,10 @@ pub fn generate_scene(
     let skin = SkinIdentity::sample(derive(seed, stream::SKIN));
     let layouts = texture_layouts(&models, config.texture_size)?;
     let points = texture::texel_points(&models, &layouts[1])?;
+    let appearance = texture::draw_appearance(&points, &mut rng(stream::APPEARANCE));
     let details = texture::draw_details(&models, &points, &mut rng(stream::DETAILS))?;
-    let textures = texture::identity_textures(&models, &layouts, &points, &skin, &details)?;
+    let textures =
+        texture::identity_textures(&models, &layouts, &points, &skin, &appearance, &details)?;
     let renderer = HandRenderer::new(&models, &layouts, &textures, device)?;
 
     // The training frame.
@@ -392,6 +400,7 @@ pub fn generate_scene(
         identity: Identity {
             betas,
             skin,
+            appearance,
             details,
         },
         studio_light: light,

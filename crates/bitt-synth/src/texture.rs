@@ -7,6 +7,13 @@
 //! and a tan line (a paler band left by a ring on the ring finger or a watch at the wrist).
 //! They are painted in texture space at the texels' rest-pose 3D points (right-hand frame; texel
 //! `i` is the same spot on both hands), so they are round and straight on the hand, not in UV.
+//!
+//! Before the details, both hands get the same **personal appearance** ([`AppearancePatch`]):
+//! smooth, centimetre-sized patches of darker or lighter skin (uneven tan, dry or sun-exposed
+//! areas) and of redness (cold fingertips, chapped knuckles) at random places. Real people have
+//! them and a texture PCA of other people cannot know where (HTML's reconstructions are
+//! smooth averages, paper Fig. 1); they are what the image, and through symmetry the other
+//! hand, must supply, so they make the coarse (PCA) texture imperfect in the way HTML is.
 
 use bitt_mesh::glam::DVec3;
 use bitt_mesh::{HandPair, Side};
@@ -101,6 +108,109 @@ pub struct SkinDetail {
     pub kind: DetailKind,
     /// Strength in `(0, 1]`.
     pub strength: f64,
+}
+
+/// What a personal appearance patch changes.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum PatchKind {
+    /// Brightness: the colour is scaled by `1 + amount` at the centre (negative: darker).
+    Tone {
+        /// Relative change of brightness at the centre.
+        amount: f64,
+    },
+    /// Redness: red up, green and blue down by `amount` (relative) at the centre.
+    Redness {
+        /// Strength at the centre (`> 0`).
+        amount: f64,
+    },
+}
+
+/// A smooth patch of personal appearance, the same on both hands (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct AppearancePatch {
+    /// Centre on the rest right hand (metres, MANO frame).
+    pub centre: [f64; 3],
+    /// Gaussian radius (metres): the effect falls to `exp(-1/2)` at this distance.
+    pub radius: f64,
+    /// What it changes.
+    pub kind: PatchKind,
+}
+
+/// Tone patches per identity.
+const TONE_PATCHES: usize = 10;
+/// Redness patches per identity.
+const REDNESS_PATCHES: usize = 8;
+
+/// Draws an identity's personal appearance: [`TONE_PATCHES`] tone patches (radius 8-20 mm,
+/// brightness ±8-20 %) and [`REDNESS_PATCHES`] redness patches (radius 6-14 mm, strength
+/// 8-25 %), centred at random texels (`points`: rest right-hand texel points, roughly uniform
+/// over the surface).
+pub fn draw_appearance(points: &[DVec3], rng: &mut SplitMix64) -> Vec<AppearancePatch> {
+    let pick = |rng: &mut SplitMix64| points[(rng.next_u64() % points.len() as u64) as usize];
+    let mut out = Vec::with_capacity(TONE_PATCHES + REDNESS_PATCHES);
+    for _ in 0..TONE_PATCHES {
+        let centre = pick(rng).to_array();
+        let radius = rng.range(0.008, 0.020);
+        let magnitude = rng.range(0.08, 0.20);
+        let amount = if rng.next_f64() < 0.5 {
+            -magnitude
+        } else {
+            magnitude
+        };
+        out.push(AppearancePatch {
+            centre,
+            radius,
+            kind: PatchKind::Tone { amount },
+        });
+    }
+    for _ in 0..REDNESS_PATCHES {
+        let centre = pick(rng).to_array();
+        let radius = rng.range(0.006, 0.014);
+        out.push(AppearancePatch {
+            centre,
+            radius,
+            kind: PatchKind::Redness {
+                amount: rng.range(0.08, 0.25),
+            },
+        });
+    }
+    out
+}
+
+/// Paints the personal appearance onto a compact texture `[3, T]` (`points`: the rest
+/// right-hand point of each texel). Brightness and redness factors of overlapping patches
+/// multiply.
+fn paint_appearance(texture: &mut [f32], points: &[DVec3], patches: &[AppearancePatch]) {
+    let t = points.len();
+    for (i, p) in points.iter().enumerate() {
+        let mut factor = [1.0f64; 3];
+        for patch in patches {
+            let d2 = (*p - DVec3::from_array(patch.centre)).length_squared();
+            let r2 = patch.radius * patch.radius;
+            if d2 > 9.0 * r2 {
+                continue;
+            }
+            let w = (-0.5 * d2 / r2).exp();
+            match patch.kind {
+                PatchKind::Tone { amount } => {
+                    for f in &mut factor {
+                        *f *= 1.0 + amount * w;
+                    }
+                }
+                PatchKind::Redness { amount } => {
+                    let a = amount * w;
+                    factor[0] *= 1.0 + 0.35 * a;
+                    factor[1] *= 1.0 - a;
+                    factor[2] *= 1.0 - 0.8 * a;
+                }
+            }
+        }
+        for (ch, f) in factor.iter().enumerate() {
+            let v = &mut texture[ch * t + i];
+            *v = (*v * *f as f32).clamp(0.0, 1.0);
+        }
+    }
 }
 
 /// Rest-pose landmarks of the right hand used to place details.
@@ -312,17 +422,19 @@ pub fn texel_points(
 }
 
 /// The ground-truth textures `[left, right]` (compact `[3, T]` each) of an identity with its
-/// one-sided details.
+/// personal appearance (both hands) and one-sided details.
 pub fn identity_textures(
     models: &HandPair,
     layouts: &[TextureLayout; 2],
     points: &[DVec3],
     skin: &SkinIdentity,
+    appearance: &[AppearancePatch],
     details: &[SkinDetail],
 ) -> Result<[Vec<f32>; 2], SynthError> {
     let mut out: [Vec<f32>; 2] = Default::default();
     for (k, side) in Side::BOTH.into_iter().enumerate() {
         let mut tex = generate_texture(&layouts[k], models.get(side), skin, side)?;
+        paint_appearance(&mut tex, points, appearance);
         paint(&mut tex, points, details, side, models);
         out[k] = tex;
     }

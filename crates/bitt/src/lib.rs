@@ -8,19 +8,25 @@
 //! - [`losses`]: the paper's loss (eq. 6-10).
 //! - [`optim`], [`checkpoint`], [`trainer`]: Adam, checkpoints, the per-scene trainer.
 //! - [`metrics`], [`evaluate`]: image and texture metrics, renders at other views and poses.
+//! - [`lpips`]: LPIPS-VGG with user-provided weights (unavailable without them).
 //! - [`outputs`], [`run`]: the run folder (textures, renders, avatar, metrics, report).
+//! - [`real`]: real data (an image + annotation pickle, InterHand2.6M scenes), real runs.
 
 pub mod assets;
+pub mod baselines;
+pub mod benchmark;
 pub mod checkpoint;
 pub mod config;
 mod error;
 pub mod evaluate;
 pub mod input;
 pub mod losses;
+pub mod lpips;
 pub mod metrics;
 pub mod optim;
 pub mod outputs;
 pub mod pipeline;
+pub mod real;
 pub mod run;
 pub mod trainer;
 

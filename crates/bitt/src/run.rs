@@ -13,9 +13,7 @@ use burn::tensor::Device;
 use crate::BittError;
 use crate::assets::{HandAssets, ViewGeometry};
 use crate::config::TrainConfig;
-use crate::evaluate::{
-    Avatar, TextureScore, ViewScore, mean_metrics, render_view, score_textures, score_view,
-};
+use crate::evaluate::{Avatar, TextureScore, ViewScore, mean_metrics, score_textures, score_view};
 use crate::input::ImageInput;
 use crate::metrics::{ImageMetrics, image_metrics};
 use crate::outputs::{
@@ -285,22 +283,20 @@ pub fn write_run(
             .collect();
         all.iter().copied().sum::<DVec3>() / all.len().max(1) as f64
     };
-    let given = trainer_scene(trainer, synthetic);
     let frames_dir = renders.join("turntable");
     std::fs::create_dir_all(&frames_dir).map_err(|e| BittError::io(&frames_dir, e))?;
     let mut frames = Vec::new();
     for k in 0..turntable_frames {
         let yaw = std::f64::consts::TAU * k as f64 / turntable_frames.max(1) as f64;
-        // The vertices' centre is in the training camera's frame.
-        let scene = TwoHandScene {
-            camera: orbit_camera(&given.camera, center, yaw, 0.0),
-            ..given.clone()
-        };
-        let img = render_view(
+        // The vertices' centre is in the training camera's frame. The training view's posed
+        // vertices are orbited directly, so real runs (no hand parameters kept in the
+        // trainer) get a turntable too.
+        let (orbited, camera) = orbit_geometry(&trainer.view.geometry, center, yaw, 0.0);
+        let img = crate::evaluate::render_geometry(
             trainer,
-            &scene,
+            &orbited,
             &avatar.fine,
-            &avatar.light_for(&scene.camera),
+            &avatar.light_for(&camera).to_light(&device),
         )?;
         write_png(&frames_dir.join(format!("frame_{k:03}.png")), &img, h, w)?;
         frames.push(img);
@@ -394,22 +390,6 @@ pub fn write_run(
     write_json(&dir.join(files::METRICS), &metrics)?;
     write_report(&dir.join(files::REPORT), trainer, &summary, &gallery)?;
     Ok(summary)
-}
-
-/// The hands and camera the trainer was built from.
-fn trainer_scene(trainer: &Trainer, synthetic: Option<&SynthScene>) -> TwoHandScene {
-    match synthetic {
-        Some(s) => TwoHandScene {
-            camera: trainer.view.geometry.scene_camera,
-            ..s.given.clone()
-        },
-        None => TwoHandScene {
-            left: None,
-            right: None,
-            camera: trainer.view.geometry.scene_camera,
-            frame: Default::default(),
-        },
-    }
 }
 
 fn score_synthetic(
@@ -659,45 +639,8 @@ impl SavedAvatar {
         let text = std::fs::read_to_string(&path).map_err(|e| BittError::io(&path, e))?;
         let config = TrainConfig::from_json(&text, &path)?;
         let scene = SynthScene::read(&dir.join(files::SCENE))?;
-        let path = dir.join("textures/textures.safetensors");
-        let bytes = std::fs::read(&path).map_err(|e| BittError::io(&path, e))?;
-        let st = safetensors::SafeTensors::deserialize(&bytes)
-            .map_err(|e| BittError::corrupt(&path, format!("not a safetensors file: {e}")))?;
-        let texture = |name: &str| -> Result<Vec<f32>, BittError> {
-            let t = st
-                .tensor(name)
-                .map_err(|_| BittError::corrupt(&path, format!("`{name}` is missing")))?;
-            if t.dtype() != safetensors::Dtype::F32 || t.shape().len() != 2 || t.shape()[0] != 3 {
-                return Err(BittError::corrupt(
-                    &path,
-                    format!(
-                        "`{name}` is {:?} {:?}, expected F32 [3, T]",
-                        t.dtype(),
-                        t.shape()
-                    ),
-                ));
-            }
-            let v: Vec<f32> = t
-                .data()
-                .chunks_exact(4)
-                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-                .collect();
-            if v.iter().any(|x| !x.is_finite()) {
-                return Err(BittError::corrupt(
-                    &path,
-                    format!("`{name}` holds non-finite values"),
-                ));
-            }
-            Ok(v)
-        };
-        let fine = [texture("left.fine")?, texture("right.fine")?];
-        let path = dir.join(files::LIGHT);
-        let text = std::fs::read_to_string(&path).map_err(|e| BittError::io(&path, e))?;
-        let light: LightValues = serde_json::from_str(&text)
-            .map_err(|e| BittError::corrupt(&path, format!("not a light: {e}")))?;
-        light
-            .validate()
-            .map_err(|e| BittError::corrupt(&path, e.to_string()))?;
+        let fine = Self::read_fine_textures(dir)?;
+        let light = Self::read_light(dir)?;
         let camera = training_camera(&scene, &config)?;
         Ok(SavedAvatar {
             config,
@@ -779,4 +722,90 @@ impl SavedAvatar {
         hands.camera = orbit_camera(&self.camera, center, yaw, pitch);
         Ok(hands)
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Shared with real runs (`crate::real`): reading a run's textures and light, orbiting a view.
+
+impl SavedAvatar {
+    /// Reads the fine textures `[3, T]` (left, right) of a run's
+    /// `textures/textures.safetensors`.
+    pub fn read_fine_textures(dir: &Path) -> Result<[Vec<f32>; 2], BittError> {
+        let path = dir.join("textures/textures.safetensors");
+        let bytes = std::fs::read(&path).map_err(|e| BittError::io(&path, e))?;
+        let st = safetensors::SafeTensors::deserialize(&bytes)
+            .map_err(|e| BittError::corrupt(&path, format!("not a safetensors file: {e}")))?;
+        let texture = |name: &str| -> Result<Vec<f32>, BittError> {
+            let t = st
+                .tensor(name)
+                .map_err(|_| BittError::corrupt(&path, format!("`{name}` is missing")))?;
+            if t.dtype() != safetensors::Dtype::F32 || t.shape().len() != 2 || t.shape()[0] != 3 {
+                return Err(BittError::corrupt(
+                    &path,
+                    format!(
+                        "`{name}` is {:?} {:?}, expected F32 [3, T]",
+                        t.dtype(),
+                        t.shape()
+                    ),
+                ));
+            }
+            let v: Vec<f32> = t
+                .data()
+                .chunks_exact(4)
+                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect();
+            if v.iter().any(|x| !x.is_finite()) {
+                return Err(BittError::corrupt(
+                    &path,
+                    format!("`{name}` holds non-finite values"),
+                ));
+            }
+            Ok(v)
+        };
+        Ok([texture("left.fine")?, texture("right.fine")?])
+    }
+
+    /// Reads a run's `light.json` (the estimated light, training camera frame).
+    pub fn read_light(dir: &Path) -> Result<LightValues, BittError> {
+        let path = dir.join(files::LIGHT);
+        let text = std::fs::read_to_string(&path).map_err(|e| BittError::io(&path, e))?;
+        let light: LightValues = serde_json::from_str(&text)
+            .map_err(|e| BittError::corrupt(&path, format!("not a light: {e}")))?;
+        light
+            .validate()
+            .map_err(|e| BittError::corrupt(&path, e.to_string()))?;
+        Ok(light)
+    }
+}
+
+/// A view's geometry seen from its camera orbited about `center` (camera frame) by `yaw` and
+/// `pitch` radians (as [`orbit_camera`]), with the orbited scene camera: the camera-frame
+/// vertices are turned instead of the camera, so no hand parameters are needed.
+pub fn orbit_geometry(
+    geometry: &ViewGeometry,
+    center: DVec3,
+    yaw: f64,
+    pitch: f64,
+) -> (ViewGeometry, PinholeCamera) {
+    let turn = DMat3::from_rotation_x(pitch) * DMat3::from_rotation_y(yaw);
+    let device = geometry.vertices[0].device();
+    let host = geometry.vertices_host.clone().map(|v| {
+        v.into_iter()
+            .map(|p| turn * (p - center) + center)
+            .collect::<Vec<_>>()
+    });
+    let vertices = [
+        crate::assets::vertex_tensor(&host[0], &device),
+        crate::assets::vertex_tensor(&host[1], &device),
+    ];
+    let camera = orbit_camera(&geometry.scene_camera, center, yaw, pitch);
+    (
+        ViewGeometry {
+            camera: geometry.camera,
+            scene_camera: camera,
+            vertices_host: host,
+            vertices,
+        },
+        camera,
+    )
 }

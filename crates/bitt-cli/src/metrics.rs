@@ -1,0 +1,434 @@
+//! `bitt metrics A.png B.png` (the image metrics of one pair as JSON) and `bitt
+//! convert-lpips` (the `lpips` package's VGG weights to the safetensors file LPIPS reads).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use bitt::lpips::{self, LpipsVgg};
+use bitt::metrics::{SsimWindow, image_metrics_with, masked_image_metrics};
+use bitt_pickle::{ArrayData, Value};
+use bitt_texture::load_image;
+use serde_json::json;
+
+use crate::device::DeviceName;
+
+/// SSIM window (`--ssim-window`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum WindowChoice {
+    /// pytorch_msssim's float32 window (BiTT's reference; the default).
+    PytorchMsssim,
+    /// The exact Gaussian (scikit-image).
+    Exact,
+}
+
+impl From<WindowChoice> for SsimWindow {
+    fn from(w: WindowChoice) -> Self {
+        match w {
+            WindowChoice::PytorchMsssim => SsimWindow::PytorchMsssim,
+            WindowChoice::Exact => SsimWindow::Exact,
+        }
+    }
+}
+
+/// Arguments of `bitt metrics`.
+#[derive(Debug, clap::Args)]
+pub struct MetricsArgs {
+    /// The first image (e.g. a render), PNG or JPEG.
+    a: PathBuf,
+    /// The second image (e.g. the ground truth), the same size.
+    b: PathBuf,
+    /// A mask image of the same size: pixels whose grey level (mean of RGB) is at least 0.5
+    /// count. L1 and PSNR use the masked pixels only; SSIM, MS-SSIM and LPIPS use both
+    /// images multiplied by the mask (black background).
+    #[arg(long)]
+    mask: Option<PathBuf>,
+    /// LPIPS-VGG weights (safetensors from `bitt convert-lpips`). Default:
+    /// $BITT_LPIPS_WEIGHTS, else ~/.cache/bitt/lpips_vgg.safetensors when it exists; without
+    /// weights `lpips` is null.
+    #[arg(long)]
+    lpips: Option<PathBuf>,
+    /// Device for LPIPS: flex, ndarray, wgpu or cuda.
+    #[arg(long, default_value = "flex")]
+    device: DeviceName,
+    /// SSIM / MS-SSIM window.
+    #[arg(long, value_enum, default_value = "pytorch-msssim")]
+    ssim_window: WindowChoice,
+}
+
+/// Arguments of `bitt convert-lpips`.
+#[derive(Debug, clap::Args)]
+pub struct ConvertLpipsArgs {
+    /// The `lpips` package's linear-layer weights, `lpips/weights/v0.1/vgg.pth` in its
+    /// install folder (`python3 -c "import lpips, os; print(os.path.dirname(lpips.__file__))"`),
+    /// or a whole `lpips.LPIPS(net='vgg').state_dict()` saved with `torch.save` (then
+    /// `--vgg` is not needed).
+    #[arg(long)]
+    lin: PathBuf,
+    /// torchvision's VGG16 weights, `vgg16-397923af.pth`
+    /// (https://download.pytorch.org/models/vgg16-397923af.pth; torch keeps a copy in
+    /// ~/.cache/torch/hub/checkpoints/). Default: that cache path.
+    #[arg(long)]
+    vgg: Option<PathBuf>,
+    /// Output safetensors file. Default: $BITT_LPIPS_WEIGHTS, else
+    /// ~/.cache/bitt/lpips_vgg.safetensors.
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+fn load_planar(path: &Path, what: &str) -> Result<bitt_texture::PlanarImage> {
+    load_image(path).with_context(|| format!("cannot read {what} {}", path.display()))
+}
+
+/// `bitt metrics`.
+pub fn run(args: &MetricsArgs) -> Result<()> {
+    let value = compute(args, lpips::default_weights_path())?;
+    println!("{}", serde_json::to_string_pretty(&value)?);
+    Ok(())
+}
+
+/// The JSON of `bitt metrics`; `default_weights` is where LPIPS weights are looked for
+/// without `--lpips`.
+fn compute(args: &MetricsArgs, default_weights: Option<PathBuf>) -> Result<serde_json::Value> {
+    let a = load_planar(&args.a, "image")?;
+    let b = load_planar(&args.b, "image")?;
+    let same_size = |p: &Path, i: &bitt_texture::PlanarImage| -> Result<()> {
+        if (i.width, i.height) != (a.width, a.height) {
+            bail!(
+                "{} is {}x{} but {} is {}x{}; the images must have the same size",
+                p.display(),
+                i.width,
+                i.height,
+                args.a.display(),
+                a.width,
+                a.height
+            );
+        }
+        Ok(())
+    };
+    same_size(&args.b, &b)?;
+    let dims = [3, a.height, a.width];
+    let window = SsimWindow::from(args.ssim_window);
+    let hw = a.width * a.height;
+    let (m, mask, lpips_inputs) = match &args.mask {
+        None => (
+            image_metrics_with(&a.data, &b.data, dims, window),
+            None,
+            (a.data.clone(), b.data.clone()),
+        ),
+        Some(p) => {
+            let mi = load_planar(p, "mask")?;
+            same_size(p, &mi)?;
+            let mask: Vec<f32> = (0..hw)
+                .map(|i| (mi.data[i] + mi.data[hw + i] + mi.data[2 * hw + i]) / 3.0)
+                .collect();
+            let m = masked_image_metrics(&a.data, &b.data, &mask, dims, window)
+                .with_context(|| format!("mask {} selects no pixel", p.display()))?;
+            let count = mask.iter().filter(|&&v| v >= 0.5).count();
+            let am = bitt::metrics::apply_mask(&a.data, &mask, dims);
+            let bm = bitt::metrics::apply_mask(&b.data, &mask, dims);
+            (m, Some(count), (am, bm))
+        }
+    };
+    let weights = match &args.lpips {
+        Some(p) => Some(p.clone()),
+        None => default_weights.clone().filter(|p| p.is_file()),
+    };
+    let (lpips_value, lpips_note) = match &weights {
+        None => (
+            None,
+            format!(
+                "LPIPS unavailable: no weights (pass --lpips FILE, set BITT_LPIPS_WEIGHTS, or \
+                 write {} with `bitt convert-lpips`); it is not estimated",
+                default_weights.map_or("~/.cache/bitt/lpips_vgg.safetensors".into(), |p| p
+                    .display()
+                    .to_string())
+            ),
+        ),
+        Some(p) => {
+            let device = args.device.device()?;
+            let net = LpipsVgg::load(p, &device)?;
+            let d = net
+                .distance(&lpips_inputs.0, &lpips_inputs.1, dims, &device)
+                .context("computing LPIPS")?;
+            (
+                Some(d),
+                format!(
+                    "LPIPS-VGG v0.1 from {}, inputs mapped from [0, 1] to [-1, 1]",
+                    p.display()
+                ),
+            )
+        }
+    };
+    let finite = |v: f64| v.is_finite().then_some(v);
+    let mut out = json!({
+        "a": args.a.display().to_string(),
+        "b": args.b.display().to_string(),
+        "width": a.width,
+        "height": a.height,
+        "l1": m.l1,
+        "psnr": finite(m.psnr),
+        "ssim": finite(m.ssim),
+        "ms_ssim": m.ms_ssim,
+        "lpips": lpips_value,
+        "lpips_note": lpips_note,
+        "ssim_window": window,
+    });
+    let obj = out.as_object_mut().expect("an object");
+    if m.psnr.is_infinite() {
+        obj.insert(
+            "psnr_note".into(),
+            json!("identical images: PSNR is infinite"),
+        );
+    }
+    if m.ms_ssim.is_none() {
+        obj.insert(
+            "ms_ssim_note".into(),
+            json!(format!(
+                "MS-SSIM needs both sides of at least {} pixels",
+                bitt::metrics::MS_SSIM_MIN_SIDE
+            )),
+        );
+    }
+    if m.ssim.is_nan() {
+        obj.insert(
+            "ssim_note".into(),
+            json!("SSIM needs both sides of at least 11 pixels"),
+        );
+    }
+    if let (Some(p), Some(count)) = (&args.mask, mask) {
+        obj.insert("mask".into(), json!(p.display().to_string()));
+        obj.insert("mask_pixels".into(), json!(count));
+    }
+    Ok(out)
+}
+
+/// The tensors of a torch state dict, by name (values as `f32`).
+/// Named tensors: (name, shape, values).
+type StateDict = Vec<(String, Vec<usize>, Vec<f32>)>;
+
+fn state_dict(path: &Path) -> Result<StateDict> {
+    let v = bitt_pickle::load_torch(path)?;
+    let Value::Dict(items) = v else {
+        bail!(
+            "{}: the checkpoint holds a {}, expected a state dict",
+            path.display(),
+            v.type_name()
+        );
+    };
+    let mut out = Vec::new();
+    for (k, t) in items {
+        let (Value::Str(name), Value::Array(a)) = (k, t) else {
+            continue;
+        };
+        if matches!(a.data, ArrayData::F32(_) | ArrayData::F64(_)) {
+            let shape = a.shape.clone();
+            out.push((name, shape, a.into_f32()));
+        }
+    }
+    Ok(out)
+}
+
+/// Our tensor name for a name of the `lpips` package's state dict or of torchvision's VGG16.
+fn our_name(name: &str) -> Option<String> {
+    // lpips: lin{l}.model.1.weight, lins.{l}.model.1.weight, net.slice{s}.{idx}.{weight,bias}
+    if let Some(rest) = name.strip_prefix("lins.") {
+        let l = rest.strip_suffix(".model.1.weight")?;
+        return Some(format!("lin{l}.weight"));
+    }
+    if let Some(rest) = name.strip_prefix("lin") {
+        let l = rest.strip_suffix(".model.1.weight")?;
+        return Some(format!("lin{l}.weight"));
+    }
+    if let Some(rest) = name.strip_prefix("net.slice") {
+        let (_, tail) = rest.split_once('.')?;
+        return Some(format!("features.{tail}"));
+    }
+    // torchvision: features.{idx}.{weight,bias} (the classifier is not used).
+    name.starts_with("features.").then(|| name.to_string())
+}
+
+/// `bitt convert-lpips`.
+pub fn convert(args: &ConvertLpipsArgs) -> Result<()> {
+    type Tensors = std::collections::HashMap<String, (Vec<usize>, Vec<f32>)>;
+    fn add(tensors: &mut Tensors, path: &Path) -> Result<()> {
+        for (name, shape, data) in state_dict(path)? {
+            if let Some(ours) = our_name(&name) {
+                tensors.entry(ours).or_insert((shape, data));
+            }
+        }
+        Ok(())
+    }
+    let mut tensors = Tensors::new();
+    add(&mut tensors, &args.lin)?;
+    let needs_vgg = lpips::weight_names()
+        .iter()
+        .any(|(n, _)| n.starts_with("features.") && !tensors.contains_key(n));
+    if needs_vgg {
+        let vgg = match &args.vgg {
+            Some(p) => p.clone(),
+            None => {
+                let p = std::env::var_os("HOME")
+                    .map(PathBuf::from)
+                    .unwrap_or_default()
+                    .join(".cache/torch/hub/checkpoints/vgg16-397923af.pth");
+                if !p.is_file() {
+                    bail!(
+                        "{} holds no VGG16 backbone and {} does not exist; pass --vgg \
+                         vgg16-397923af.pth (from https://download.pytorch.org/models/\
+                         vgg16-397923af.pth)",
+                        args.lin.display(),
+                        p.display()
+                    );
+                }
+                p
+            }
+        };
+        add(&mut tensors, &vgg)?;
+    }
+    let mut ordered = Vec::new();
+    for (name, shape) in lpips::weight_names() {
+        let Some((s, data)) = tensors.remove(&name) else {
+            bail!(
+                "tensor {name} ({shape:?}) was found in none of the inputs ({}{})",
+                args.lin.display(),
+                args.vgg
+                    .as_ref()
+                    .map_or(String::new(), |p| format!(", {}", p.display()))
+            );
+        };
+        if s != shape {
+            bail!("tensor {name} has shape {s:?} in the inputs, expected {shape:?}");
+        }
+        ordered.push((name, shape, data));
+    }
+    let out = match &args.out {
+        Some(p) => p.clone(),
+        None => lpips::default_weights_path()
+            .context("no --out and no HOME to put ~/.cache/bitt/lpips_vgg.safetensors in")?,
+    };
+    lpips::save_weights(&out, &ordered)?;
+    // Read it back as LPIPS will.
+    LpipsVgg::load(&out, &burn::tensor::Device::flex())
+        .with_context(|| format!("checking {}", out.display()))?;
+    println!(
+        "{}",
+        json!({"written": out.display().to_string(), "tensors": ordered.len()})
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Debug, Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: MetricsArgs,
+    }
+
+    fn scratch(name: &str) -> PathBuf {
+        let d =
+            std::env::temp_dir().join(format!("bitt-metrics-test-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    fn parse(extra: &[&str]) -> MetricsArgs {
+        let mut all = vec!["bitt"];
+        all.extend_from_slice(extra);
+        Cli::try_parse_from(all).unwrap().args
+    }
+
+    fn ramp(w: usize, h: usize, k: f32) -> Vec<f32> {
+        (0..3 * w * h)
+            .map(|i| ((i % w) as f32 / w as f32 * k + (i / w % h) as f32 / h as f32) / 2.0)
+            .collect()
+    }
+
+    #[test]
+    fn metrics_json_and_errors() {
+        let dir = scratch("json");
+        let (a, b, m, small) = (
+            dir.join("a.png"),
+            dir.join("b.png"),
+            dir.join("m.png"),
+            dir.join("small.png"),
+        );
+        bitt_texture::save_png8(&a, &ramp(40, 30, 1.0), 40, 30).unwrap();
+        bitt_texture::save_png8(&b, &ramp(40, 30, 0.8), 40, 30).unwrap();
+        let mask: Vec<f32> = (0..3 * 40 * 30)
+            .map(|i| if i % 40 < 20 { 1.0 } else { 0.0 })
+            .collect();
+        bitt_texture::save_png8(&m, &mask, 40, 30).unwrap();
+        bitt_texture::save_png8(&small, &ramp(20, 30, 1.0), 20, 30).unwrap();
+        let s = |p: &Path| p.to_str().unwrap().to_string();
+        let missing = dir.join("none.safetensors");
+        // No LPIPS weights: null with a note.
+        let v = compute(&parse(&[&s(&a), &s(&b), "--lpips", &s(&missing)]), None);
+        let e = format!("{:#}", v.unwrap_err());
+        assert!(e.contains("none.safetensors"), "{e}");
+        let v = compute(&parse(&[&s(&a), &s(&b)]), Some(missing.clone())).unwrap();
+        assert!(v["lpips"].is_null());
+        assert!(v["lpips_note"].as_str().unwrap().contains("unavailable"));
+        assert!(v["l1"].as_f64().unwrap() > 0.0);
+        assert!(v["psnr"].as_f64().unwrap() > 10.0);
+        assert!(v["ssim"].as_f64().unwrap() < 1.0);
+        assert!(v["ms_ssim"].is_null());
+        // Identical images: PSNR null with a note, SSIM 1.
+        let v = compute(&parse(&[&s(&a), &s(&a)]), None).unwrap();
+        assert!(v["psnr"].is_null() && v["psnr_note"].is_string());
+        assert!((v["ssim"].as_f64().unwrap() - 1.0).abs() < 1e-6);
+        // Mask: the left half of the pixels.
+        let v = compute(&parse(&[&s(&a), &s(&b), "--mask", &s(&m)]), None).unwrap();
+        assert_eq!(v["mask_pixels"].as_u64(), Some(20 * 30));
+        // Different sizes and unreadable files name the file.
+        let e = format!(
+            "{:#}",
+            compute(&parse(&[&s(&a), &s(&small)]), None).unwrap_err()
+        );
+        assert!(e.contains("small.png") && e.contains("20x30"), "{e}");
+        let e = format!(
+            "{:#}",
+            compute(&parse(&[&s(&a), &s(&b), "--mask", &s(&small)]), None).unwrap_err()
+        );
+        assert!(e.contains("small.png"), "{e}");
+        let junk = dir.join("junk.png");
+        std::fs::write(&junk, b"not an image").unwrap();
+        let e = format!(
+            "{:#}",
+            compute(&parse(&[&s(&junk), &s(&b)]), None).unwrap_err()
+        );
+        assert!(e.contains("junk.png"), "{e}");
+        let e = format!(
+            "{:#}",
+            compute(&parse(&[&s(&dir.join("gone.png")), &s(&b)]), None).unwrap_err()
+        );
+        assert!(e.contains("gone.png"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn lpips_names_map_from_both_packages() {
+        assert_eq!(
+            our_name("lin3.model.1.weight").as_deref(),
+            Some("lin3.weight")
+        );
+        assert_eq!(
+            our_name("lins.0.model.1.weight").as_deref(),
+            Some("lin0.weight")
+        );
+        assert_eq!(
+            our_name("net.slice4.19.bias").as_deref(),
+            Some("features.19.bias")
+        );
+        assert_eq!(
+            our_name("features.28.weight").as_deref(),
+            Some("features.28.weight")
+        );
+        assert_eq!(our_name("classifier.0.weight"), None);
+        assert_eq!(our_name("scaling_layer.shift"), None);
+    }
+}
