@@ -252,9 +252,9 @@ fn annotation_run_trains_resumes_and_renders_in_other_poses() {
     let (hands, prior) = (HandSource::Procedural, PriorSource::Procedural);
     let mut setup = annotation_setup(&img, &pkl, &hands, &prior, tiny(3), None, &device).unwrap();
     assert_eq!(setup.trainer.view.image.dims(), [1, 3, 32, 32]);
-    // Both hands are seen.
+    // Both hands are seen (32 x 32 pixels cover few of the 128² layout's texels).
     let [lv, rv] = setup.trainer.view.visible_fraction();
-    assert!(lv > 0.05 && rv > 0.05, "{lv} {rv}");
+    assert!(lv > 0.01 && rv > 0.01, "{lv} {rv}");
     std::fs::create_dir_all(&run).unwrap();
     std::fs::write(
         run.join("config.json"),
@@ -389,4 +389,48 @@ fn bad_annotation_inputs_are_named() {
     ));
     assert!(e.contains("MANO"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The real demo frame (`../shared/data/interhand_demo/01.jpg` + `01.pkl`, when the shared
+/// folder is beside the checkout) trains with the procedural hands, and the avatar renders in
+/// the pose of `02.pkl`. Skipped, saying so, where the frames are absent.
+#[test]
+fn demo_frame_trains_with_procedural_hands_if_present() {
+    let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/interhand_demo");
+    if !demo.join("01.pkl").is_file() || !demo.join("01.jpg").is_file() {
+        eprintln!(
+            "skipped: the InterHand demo frames are not at {} (they are not part of the \
+             project)",
+            demo.display()
+        );
+        return;
+    }
+    let device = Device::flex().autodiff();
+    let mut setup = annotation_setup(
+        &demo.join("01.jpg"),
+        &demo.join("01.pkl"),
+        &HandSource::Procedural,
+        &PriorSource::Procedural,
+        tiny(2),
+        None,
+        &device,
+    )
+    .unwrap();
+    setup.trainer.train(None, &mut Silent).unwrap();
+    let h = &setup.trainer.history;
+    assert!(h.iter().all(|t| t.is_finite()), "{h:?}");
+    let [lv, rv] = setup.trainer.view.visible_fraction();
+    assert!(lv > 0.01 && rv > 0.01, "{lv} {rv}");
+    let models = procedural_pair();
+    let pose = annotation_pose(&demo.join("02.pkl"), &models, 32).unwrap();
+    let avatar = bitt::evaluate::Avatar::from_trainer(&setup.trainer).unwrap();
+    let img = render_textures(
+        &setup.trainer.assets,
+        &avatar.fine,
+        &pose,
+        &avatar.light,
+        &Device::flex(),
+    )
+    .unwrap();
+    assert!(img.iter().filter(|&&v| v > 0.0).count() > 50);
 }

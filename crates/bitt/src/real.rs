@@ -45,8 +45,10 @@
 //! sources (paths of the user's MANO / HTML folders; licensed files are never copied), and
 //! the hands of the training view (and of the novel views and poses) with their cameras
 //! already fitted to the preset's size. `input/images.safetensors` holds the exact `f32`
-//! images the trainer saw (and the novel views' and poses' ones), so `--resume` rebuilds the same trainer even when the
-//! original image has moved; PNG copies of every view are there to look at.
+//! images the trainer saw (and the novel views' and poses' ones) and the exact `f64` values
+//! of those hands and cameras (JSON parsing may change a last bit), so `--resume` rebuilds
+//! the same trainer even when the original image and annotation have moved or changed; PNG
+//! copies of every view are in `input/` to look at.
 
 use std::path::{Path, PathBuf};
 
@@ -848,7 +850,8 @@ impl RealInput {
         })
     }
 
-    /// Reads `input.json` of a real run.
+    /// Reads `input.json` of a real run, with the exact hand and camera values stored in
+    /// `input/images.safetensors`.
     pub fn read(dir: &Path) -> Result<Self, BittError> {
         let path = dir.join(files::INPUT);
         let text = std::fs::read_to_string(&path).map_err(|e| BittError::io(&path, e))?;
@@ -859,6 +862,17 @@ impl RealInput {
                 &path,
                 format!("format `{}`, expected `{INPUT_FORMAT}`", input.format),
             ));
+        }
+        let mut input = input;
+        let path = dir.join(files::IMAGES);
+        let bytes = std::fs::read(&path).map_err(|e| BittError::io(&path, e))?;
+        let st = safetensors::SafeTensors::deserialize(&bytes)
+            .map_err(|e| BittError::corrupt(&path, format!("not a safetensors file: {e}")))?;
+        for view in std::iter::once(&mut input.train)
+            .chain(&mut input.novel_views)
+            .chain(&mut input.novel_poses)
+        {
+            restore_exact_floats(&st, &path, &view.name, &mut view.hands)?;
         }
         Ok(input)
     }
@@ -888,33 +902,139 @@ impl RealInput {
     }
 }
 
+/// Every float of a scene (hand parameters, camera), in a fixed order: `input.json` is for
+/// reading, these are stored exactly beside the images (JSON parsing may round the last bit,
+/// and an exact resume needs the same geometry).
+fn float_slots(scene: &mut TwoHandScene) -> Vec<&mut f64> {
+    let TwoHandScene {
+        left,
+        right,
+        camera,
+        ..
+    } = scene;
+    let mut out: Vec<&mut f64> = Vec::new();
+    fn mat(m: &mut bitt_mesh::glam::DMat3) -> [&mut f64; 9] {
+        let bitt_mesh::glam::DMat3 {
+            x_axis,
+            y_axis,
+            z_axis,
+        } = m;
+        [
+            &mut x_axis.x,
+            &mut x_axis.y,
+            &mut x_axis.z,
+            &mut y_axis.x,
+            &mut y_axis.y,
+            &mut y_axis.z,
+            &mut z_axis.x,
+            &mut z_axis.y,
+            &mut z_axis.z,
+        ]
+    }
+    for hand in [left.as_mut(), right.as_mut()].into_iter().flatten() {
+        let bitt_mesh::HandParams {
+            root_rotation,
+            pose,
+            betas,
+            trans,
+        } = hand;
+        out.extend(mat(root_rotation));
+        match pose {
+            bitt_mesh::HandPose::Pca(v)
+            | bitt_mesh::HandPose::AxisAngle(v)
+            | bitt_mesh::HandPose::MeanRelativeAxisAngle(v) => out.extend(v.iter_mut()),
+        }
+        out.extend(betas.iter_mut());
+        out.extend([&mut trans.x, &mut trans.y, &mut trans.z]);
+    }
+    let PinholeCamera {
+        intrinsics,
+        rotation,
+        translation,
+        ..
+    } = camera;
+    out.extend(mat(intrinsics));
+    out.extend(mat(rotation));
+    out.extend([&mut translation.x, &mut translation.y, &mut translation.z]);
+    out
+}
+
 fn write_image_safetensors(path: &Path, views: &[&RealView], size: usize) -> Result<(), BittError> {
-    let bytes: Vec<(String, Vec<u8>)> = views
-        .iter()
-        .map(|v| {
-            (
-                v.name.clone(),
-                v.image.iter().flat_map(|x| x.to_le_bytes()).collect(),
-            )
-        })
-        .collect();
-    let mut tensors = Vec::new();
-    for (name, b) in &bytes {
-        let view = safetensors::tensor::TensorView::new(
+    let mut bytes: Vec<(String, safetensors::Dtype, Vec<usize>, Vec<u8>)> = Vec::new();
+    for v in views {
+        bytes.push((
+            v.name.clone(),
             safetensors::Dtype::F32,
             vec![3, size, size],
-            b,
-        )
-        .map_err(|e| BittError::corrupt(path, format!("cannot encode image `{name}`: {e}")))?;
+            v.image.iter().flat_map(|x| x.to_le_bytes()).collect(),
+        ));
+        let mut hands = v.hands.clone();
+        let floats: Vec<u8> = float_slots(&mut hands)
+            .into_iter()
+            .flat_map(|x| x.to_le_bytes())
+            .collect();
+        bytes.push((
+            format!("hands.{}", v.name),
+            safetensors::Dtype::F64,
+            vec![floats.len() / 8],
+            floats,
+        ));
+    }
+    let mut tensors = Vec::new();
+    for (name, dtype, shape, b) in &bytes {
+        let view = safetensors::tensor::TensorView::new(*dtype, shape.clone(), b)
+            .map_err(|e| BittError::corrupt(path, format!("cannot encode `{name}`: {e}")))?;
         tensors.push((name.clone(), view));
     }
     let meta = std::collections::HashMap::from([(
         "format".to_string(),
-        "bitt-real-input-images: [3, S, S] f32 in [0, 1] per view".to_string(),
+        "bitt-real-input-images: per view, `NAME` [3, S, S] f32 in [0, 1] and `hands.NAME` \
+         the exact f64 values of input.json's hands and camera"
+            .to_string(),
     )]);
     let data = safetensors::serialize(tensors, Some(meta))
         .map_err(|e| BittError::corrupt(path, format!("cannot encode: {e}")))?;
     bitt_mesh::export::write_atomically(path, &data)?;
+    Ok(())
+}
+
+/// Puts the exact floats stored for view `name` into `hands`.
+fn restore_exact_floats(
+    st: &safetensors::SafeTensors,
+    path: &Path,
+    name: &str,
+    hands: &mut TwoHandScene,
+) -> Result<(), BittError> {
+    let key = format!("hands.{name}");
+    let t = st
+        .tensor(&key)
+        .map_err(|_| BittError::corrupt(path, format!("`{key}` is missing")))?;
+    let values: Vec<f64> = t
+        .data()
+        .chunks_exact(8)
+        .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
+        .collect();
+    let slots = float_slots(hands);
+    if t.dtype() != safetensors::Dtype::F64 || values.len() != slots.len() {
+        return Err(BittError::corrupt(
+            path,
+            format!(
+                "`{key}` is {:?} with {} values; input.json's view `{name}` has {}",
+                t.dtype(),
+                values.len(),
+                slots.len()
+            ),
+        ));
+    }
+    if values.iter().any(|x| !x.is_finite()) {
+        return Err(BittError::corrupt(
+            path,
+            format!("`{key}` holds non-finite values"),
+        ));
+    }
+    for (slot, v) in slots.into_iter().zip(values) {
+        *slot = v;
+    }
     Ok(())
 }
 
