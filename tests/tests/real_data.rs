@@ -434,3 +434,95 @@ fn demo_frame_trains_with_procedural_hands_if_present() {
     .unwrap();
     assert!(img.iter().filter(|&&v| v > 0.0).count() > 50);
 }
+
+/// A MANO folder (the procedural hands saved as the project's MANO safetensors, without UV
+/// layouts) and an HTML folder (`uvs.pkl` and an `html.safetensors` texture PCA at 256²
+/// with 12 components): the HTML UVs go on both hands (the left's derived from the winding),
+/// the prior is resampled to the `tiny` preset's 128² layout, the HTML network is built for
+/// 12 coefficients, and the run's avatar reloads its hands from the recorded folders.
+#[test]
+fn mano_and_html_folders_train_with_the_html_prior() {
+    use bitt_tests::pickle_writer::{PyValue, write_protocol4};
+    use bitt_texture::{TextureLayout, TexturePca};
+    let dir = scratch("mano-html");
+    let (mano, html) = (dir.join("mano"), dir.join("html"));
+    std::fs::create_dir_all(&mano).unwrap();
+    std::fs::create_dir_all(&html).unwrap();
+    let pair = procedural_pair();
+    let uv = pair.right.uv.clone().unwrap();
+    for (model, name) in [(&pair.left, "MANO_LEFT"), (&pair.right, "MANO_RIGHT")] {
+        let mut m = model.clone();
+        m.uv = None;
+        bitt_mesh::mano::save_safetensors(&m, &mano.join(format!("{name}.safetensors"))).unwrap();
+    }
+    let uvs = PyValue::dict(vec![
+        (
+            "verts_uvs",
+            PyValue::f64_array(
+                &[uv.uvs.len(), 2],
+                uv.uvs.iter().flat_map(|p| [p.x, p.y]).collect(),
+            ),
+        ),
+        (
+            "faces_uvs",
+            PyValue::NdArrayI64 {
+                shape: vec![uv.faces.len(), 3],
+                data: uv.faces.iter().flatten().map(|&i| i64::from(i)).collect(),
+                fortran: false,
+            },
+        ),
+    ]);
+    std::fs::write(html.join("uvs.pkl"), write_protocol4(&uvs)).unwrap();
+    let layout = TextureLayout::from_uv(&uv, 256, 256, 0).unwrap();
+    let (t, k) = (layout.num_texels(), 12);
+    let mean: Vec<f32> = (0..3 * t).map(|i| 150.0 + 40.0 * (i / t) as f32).collect();
+    let basis: Vec<f32> = (0..3 * t * k)
+        .map(|i| ((i * 7919) % 101) as f32 / 101.0 - 0.5)
+        .collect();
+    TexturePca::new(layout, mean, basis, k, 1.0 / 255.0)
+        .unwrap()
+        .save_safetensors(&html.join("html.safetensors"))
+        .unwrap();
+
+    let (img, pkl) = demo_pair(&dir);
+    let device = Device::flex().autodiff();
+    let (hands, prior) = (
+        HandSource::Mano { dir: mano.clone() },
+        PriorSource::Html { dir: html.clone() },
+    );
+    let mut setup = annotation_setup(&img, &pkl, &hands, &prior, tiny(2), None, &device).unwrap();
+    assert_eq!(setup.trainer.config.nets.html.coefficients_per_hand, 12);
+    assert_eq!(setup.trainer.config.texture.components, 12);
+    setup.trainer.config.validate().unwrap();
+    // The prior's mean (150 / 190 / 230 of 255) is on the hands' 128² layout.
+    let t = setup.trainer.assets.num_texels();
+    let coarse = bitt::trainer::read(setup.trainer.pca.mean.clone().inner()).unwrap();
+    assert_eq!(coarse.len(), 3 * t);
+    assert!((coarse[t / 2] - 150.0).abs() < 1e-3 && (coarse[2 * t + 5] - 230.0).abs() < 1e-3);
+    setup.trainer.train(None, &mut Silent).unwrap();
+    let run = dir.join("run");
+    std::fs::create_dir_all(&run).unwrap();
+    std::fs::write(
+        run.join("config.json"),
+        serde_json::to_string(&setup.trainer.config).unwrap(),
+    )
+    .unwrap();
+    setup.input.write(&run, &setup.scene).unwrap();
+    bitt::run::write_run(&run, &setup.trainer, None, 0).unwrap();
+    let avatar = RealAvatar::load(&run).unwrap();
+    assert_eq!(avatar.input.hands, hands.absolute());
+    let assets = avatar.assets().unwrap();
+    assert_eq!(assets.num_texels(), t);
+    // MANO without HTML is refused.
+    let e = err(annotation_setup(
+        &img,
+        &pkl,
+        &hands,
+        &PriorSource::Procedural,
+        tiny(1),
+        None,
+        &device,
+    ));
+    assert!(e.contains("HTML"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -53,7 +53,8 @@ pub struct RenderAvatarArgs {
     pub pose_seed: u64,
     /// Light as JSON or a JSON file (`{"ambient": [r,g,b], "diffuse": .., "specular": ..,
     /// "location": [x,y,z]}`, camera frame of the rendered view). Default: the run's
-    /// estimated light (see the command's documentation).
+    /// estimated light, fixed in the world; with --pose / --procedural-pose, placed relative
+    /// to the camera as it was in the training view.
     #[arg(long)]
     pub light: Option<String>,
     /// Side of the square output in pixels (default: the run's image size); the camera's

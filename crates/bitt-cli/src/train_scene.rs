@@ -593,6 +593,80 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
     }
 
+    /// `train-scene --interhand` on a miniature dataset: the selected scene trains, its novel
+    /// views and poses are scored, the run resumes, and `render-avatar --novel-pose` works.
+    #[test]
+    fn interhand_scene_trains_scores_and_renders() {
+        let dir = scratch("cli-interhand");
+        let root = bitt_tests::real_fixture::write_mini_interhand(&dir.join("ih"));
+        let (out, cache) = (dir.join("run"), dir.join("cache"));
+        run(&args(&[
+            "--interhand",
+            s(&root),
+            "--capture",
+            "0",
+            "--iterations",
+            "1",
+            "--cache",
+            s(&cache),
+            "--out",
+            s(&out),
+        ]))
+        .unwrap();
+        let scores: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join(REAL_SCORES)).unwrap()).unwrap();
+        assert_eq!(scores["novel_poses"]["count"], 2);
+        assert!(out.join("input/pose_01.png").is_file());
+        let input = RealInput::read(&out).unwrap();
+        assert!(matches!(
+            input.source,
+            bitt::real::RealSource::InterHand { frame: 100, .. }
+        ));
+        let resume = Cli::try_parse_from([
+            "bitt",
+            "--resume",
+            s(&out),
+            "--iterations",
+            "2",
+            "--cache",
+            s(&cache),
+        ])
+        .unwrap()
+        .args;
+        run(&resume).unwrap();
+        let png = dir.join("pose1.png");
+        let avatar = AvatarCli::try_parse_from([
+            "bitt",
+            "--run",
+            s(&out),
+            "--novel-pose",
+            "1",
+            "--out",
+            s(&png),
+        ])
+        .unwrap()
+        .args;
+        crate::render_avatar::run(&avatar).unwrap();
+        assert!(png.is_file());
+        let e = format!(
+            "{:#}",
+            run(&args(&[
+                "--interhand",
+                s(&root),
+                "--capture",
+                "3",
+                "--cache",
+                s(&cache),
+                "--out",
+                s(&dir.join("run2")),
+            ]))
+            .unwrap_err()
+        );
+        assert!(e.contains("capture 3") && e.contains("_data.json"), "{e}");
+        assert!(!dir.join("run2").exists());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
     /// Bad real inputs fail before the run folder is created.
     #[test]
     fn bad_real_inputs_write_nothing() {
