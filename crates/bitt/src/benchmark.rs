@@ -22,8 +22,7 @@ use crate::BittError;
 use crate::assets::ViewGeometry;
 use crate::baselines::{Baseline, BaselineConfig, run_baseline};
 use crate::config::TrainConfig;
-use crate::evaluate::{Avatar, hand_image, move_light, render_geometry};
-use crate::input::ImageInput;
+use crate::evaluate::{Avatar, fit_synthetic_view, hand_image, move_light, render_geometry};
 use crate::metrics::{ImageMetrics, image_metrics, texel_l1};
 use crate::run::synthetic_trainer;
 use crate::trainer::{Observer, Trainer, read};
@@ -189,40 +188,6 @@ struct Candidate {
     light: LightValues,
 }
 
-/// Ground truth of a synthetic view brought to the preset's size like the input:
-/// (hand image `[3, S, S]`, the hands with the fitted camera).
-fn fit_view(view: &SynthView, size: usize) -> Result<(Vec<f32>, TwoHandScene), BittError> {
-    let input = ImageInput {
-        image: view.image.clone(),
-        mask: None,
-        camera: view.hands.camera,
-    };
-    let (image, masks, camera) = if input.size() == [size, size] {
-        (view.image.clone(), view.masks.clone(), view.hands.camera)
-    } else {
-        let f = input.fit_square(None, size)?;
-        let m = |m: &Vec<f32>| {
-            let rgb: Vec<f32> = [m.as_slice(), m, m].concat();
-            ImageInput {
-                image: rgb,
-                mask: None,
-                camera: view.hands.camera,
-            }
-            .fit_square(None, size)
-            .map(|x| x.image[..size * size].to_vec())
-        };
-        (f.image, [m(&view.masks[0])?, m(&view.masks[1])?], f.camera)
-    };
-    let gt = hand_image(&image, &masks, size * size)?;
-    Ok((
-        gt,
-        TwoHandScene {
-            camera,
-            ..view.hands.clone()
-        },
-    ))
-}
-
 /// Ground truth prepared once per scene: hand images and posed geometry of every view.
 struct Truth {
     input: (Vec<f32>, ViewGeometry, TwoHandScene),
@@ -234,7 +199,8 @@ impl Truth {
     fn new(trainer: &Trainer, scene: &SynthScene, device: &Device) -> Result<Self, BittError> {
         let size = trainer.config.nets.image_size;
         let prep = |v: &SynthView| -> Result<(Vec<f32>, ViewGeometry, TwoHandScene), BittError> {
-            let (gt, hands) = fit_view(v, size)?;
+            let (image, masks, hands) = fit_synthetic_view(v, size)?;
+            let gt = hand_image(&image, &masks, size * size)?;
             let geometry = ViewGeometry::new(&trainer.assets, &hands, device)?;
             Ok((gt, geometry, hands))
         };

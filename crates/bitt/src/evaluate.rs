@@ -196,6 +196,43 @@ pub fn score_view(
     ))
 }
 
+/// Image `[3, S, S]`, hand masks `[S, S]` and the hands with the fitted camera.
+pub type FittedView = (Vec<f32>, [Vec<f32>; 2], TwoHandScene);
+
+/// A synthetic view's ground truth brought to the preset's `size` as the input is (crop
+/// around the hands and resize, intrinsics adjusted): (image `[3, S, S]`, hand masks
+/// `[S, S]` each, the hands with the fitted camera).
+pub fn fit_synthetic_view(
+    view: &bitt_synth::SynthView,
+    size: usize,
+) -> Result<FittedView, BittError> {
+    let input = crate::input::ImageInput {
+        image: view.image.clone(),
+        mask: None,
+        camera: view.hands.camera,
+    };
+    let (image, masks, camera) = if input.size() == [size, size] {
+        (view.image.clone(), view.masks.clone(), view.hands.camera)
+    } else {
+        let f = input.fit_square(None, size)?;
+        let m = |m: &Vec<f32>| {
+            crate::input::ImageInput {
+                image: [m.as_slice(), m, m].concat(),
+                mask: None,
+                camera: view.hands.camera,
+            }
+            .fit_square(None, size)
+            .map(|x| x.image[..size * size].to_vec())
+        };
+        (f.image, [m(&view.masks[0])?, m(&view.masks[1])?], f.camera)
+    };
+    let hands = TwoHandScene {
+        camera,
+        ..view.hands.clone()
+    };
+    Ok((image, masks, hands))
+}
+
 /// `image * (mask_l + mask_r)` clamped: the ground-truth hand image.
 pub fn hand_image(image: &[f32], masks: &[Vec<f32>; 2], hw: usize) -> Result<Vec<f32>, BittError> {
     if image.len() != 3 * hw || masks.iter().any(|m| m.len() != hw) {

@@ -402,34 +402,7 @@ fn score_synthetic(
     let size = trainer.config.nets.image_size;
     let score = |view: &bitt_synth::SynthView| -> Result<Scored, BittError> {
         // Bring ground truth to the preset's size like the input.
-        let input = ImageInput {
-            image: view.image.clone(),
-            mask: None,
-            camera: view.hands.camera,
-        };
-        let (image, masks, camera) = if input.size() == [size, size] {
-            (view.image.clone(), view.masks.clone(), view.hands.camera)
-        } else {
-            let f = input.fit_square(None, size)?;
-            let m = |m: &Vec<f32>| {
-                ImageInput {
-                    image: mask_rgb(m),
-                    mask: None,
-                    camera: view.hands.camera,
-                }
-                .fit_square(None, size)
-                .map(|x| x.image[..size * size].to_vec())
-            };
-            (
-                [f.image].concat(),
-                [m(&view.masks[0])?, m(&view.masks[1])?],
-                f.camera,
-            )
-        };
-        let hands = TwoHandScene {
-            camera,
-            ..view.hands.clone()
-        };
+        let (image, masks, hands) = crate::evaluate::fit_synthetic_view(view, size)?;
         let (s, fine, coarse) = score_view(trainer, avatar, &hands, &image, &masks)?;
         let gt = crate::evaluate::hand_image(&image, &masks, size * size)?;
         Ok((s, fine, coarse, gt))
