@@ -76,6 +76,9 @@ pub struct TrainSceneArgs {
     /// Named configuration.
     #[arg(long, default_value = "quick")]
     pub preset: Preset,
+    /// A full training configuration (a run's `config.json`, edited) instead of --preset.
+    #[arg(long, conflicts_with = "preset")]
+    pub config: Option<PathBuf>,
     /// Backend.
     #[arg(long, value_enum, default_value = "flex")]
     pub device: DeviceName,
@@ -355,7 +358,14 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
                     args.out.display()
                 );
             }
-            let mut config = TrainConfig::preset(args.preset);
+            let mut config = match &args.config {
+                Some(path) => {
+                    let text = std::fs::read_to_string(path)
+                        .with_context(|| format!("reading {}", path.display()))?;
+                    TrainConfig::from_json(&text, path)?
+                }
+                None => TrainConfig::preset(args.preset),
+            };
             if let Some(n) = args.iterations {
                 config.iterations = n;
             }
@@ -497,6 +507,41 @@ mod tests {
 
     fn s(p: &Path) -> &str {
         p.to_str().unwrap()
+    }
+
+    /// `--config FILE` replaces the preset (the run's `config.json` is that file's content);
+    /// it conflicts with `--preset`, and a broken file is named and leaves nothing behind.
+    #[test]
+    fn config_file_replaces_the_preset() {
+        let dir = scratch("cli-config");
+        let mut c = TrainConfig::preset(Preset::Tiny);
+        c.loss.alb = 0.0;
+        c.iterations = 2;
+        c.seed = 7;
+        let path = dir.join("my-config.json");
+        std::fs::write(&path, serde_json::to_string(&c).unwrap()).unwrap();
+        let (out, cache) = (dir.join("run"), dir.join("cache"));
+        let parse = |extra: &[&str]| {
+            let mut all = vec!["bitt", "--turntable", "2", "--cache", s(&cache)];
+            all.extend_from_slice(extra);
+            Cli::try_parse_from(all).map(|c| c.args)
+        };
+        run(&parse(&["--config", s(&path), "--out", s(&out)]).unwrap()).unwrap();
+        let text = std::fs::read_to_string(out.join(files::CONFIG)).unwrap();
+        let back = TrainConfig::from_json(&text, &out).unwrap();
+        assert_eq!(back.loss.alb, 0.0);
+        assert_eq!((back.iterations, back.seed), (2, 7));
+        assert_eq!(back.preset, Preset::Tiny);
+        assert!(parse(&["--config", s(&path), "--preset", "quick"]).is_err());
+        std::fs::write(&path, "{\"preset\": ").unwrap();
+        let other = dir.join("run2");
+        let e = format!(
+            "{:#}",
+            run(&parse(&["--config", s(&path), "--out", s(&other)]).unwrap()).unwrap_err()
+        );
+        assert!(e.contains("my-config.json"), "{e}");
+        assert!(!other.exists());
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     /// `train-scene --image --annotation --procedural`, then `--resume` and `render-avatar`

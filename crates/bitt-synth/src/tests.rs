@@ -331,3 +331,33 @@ fn write_docs_synth_contact() {
     let out = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/images/synth_contact.png");
     bitt_texture::save_png8(&out, &img, w, h).unwrap();
 }
+
+/// Prints how far the default [`MeshNoise`] moves the given meshes in the image
+/// (`cargo test --release --workspace mesh_noise_scale -- --ignored --nocapture`).
+#[test]
+#[ignore = "prints the mesh-noise calibration; slow"]
+fn mesh_noise_scale() {
+    let device = Device::flex();
+    for scale in [3.2, 1.0, 0.5] {
+        let d = MeshNoise::default();
+        let noise = MeshNoise {
+            pose_std: d.pose_std * scale,
+            shape_std: d.shape_std * scale,
+            translation_px: d.translation_px * scale,
+        };
+        let mut means = Vec::new();
+        for seed in benchmark_seeds(4) {
+            let cfg = SynthConfig {
+                size: 128,
+                texture_size: 64,
+                novel_views: 1,
+                novel_poses: 1,
+                mesh_noise: Some(noise),
+                ..SynthConfig::default()
+            };
+            let scene = generate_scene(&cfg, seed, &device).unwrap();
+            means.push(scene.given_mesh_error_px().unwrap());
+        }
+        eprintln!("scale {scale}: {noise:?} -> (mean, max) px at 128: {means:?}");
+    }
+}

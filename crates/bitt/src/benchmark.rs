@@ -23,7 +23,9 @@ use crate::assets::ViewGeometry;
 use crate::baselines::{Baseline, BaselineConfig, run_baseline};
 use crate::config::TrainConfig;
 use crate::evaluate::{Avatar, fit_synthetic_view, hand_image, move_light, render_geometry};
+use crate::lpips::LpipsVgg;
 use crate::metrics::{ImageMetrics, image_metrics, texel_l1};
+use crate::real::{RealScene, RealView, hand_masks};
 use crate::run::synthetic_trainer;
 use crate::trainer::{Observer, Trainer, read};
 
@@ -196,6 +198,58 @@ struct Truth {
 }
 
 impl Truth {
+    /// From prepared views: each view's ground-truth hand image and hands.
+    fn from_views(
+        trainer: &Trainer,
+        input: (Vec<f32>, TwoHandScene),
+        views: Vec<(Vec<f32>, TwoHandScene)>,
+        poses: Vec<(Vec<f32>, TwoHandScene)>,
+        device: &Device,
+    ) -> Result<Self, BittError> {
+        let prep = |(gt, hands): (Vec<f32>, TwoHandScene)| {
+            let geometry = ViewGeometry::new(&trainer.assets, &hands, device)?;
+            Ok::<_, BittError>((gt, geometry, hands))
+        };
+        Ok(Truth {
+            input: prep(input)?,
+            views: views.into_iter().map(prep).collect::<Result<_, _>>()?,
+            poses: poses.into_iter().map(prep).collect::<Result<_, _>>()?,
+        })
+    }
+
+    /// A real scene: each photograph times the silhouettes of its annotated meshes (the
+    /// reference's `masked_img`).
+    fn real(trainer: &Trainer, scene: &RealScene, device: &Device) -> Result<Self, BittError> {
+        let size = trainer.config.nets.image_size;
+        let prep = |v: &RealView| -> Result<(Vec<f32>, TwoHandScene), BittError> {
+            let masks = hand_masks(trainer, &v.hands)?;
+            Ok((hand_image(&v.image, &masks, size * size)?, v.hands.clone()))
+        };
+        Self::from_views(
+            trainer,
+            prep(&scene.train)?,
+            scene
+                .novel_views
+                .iter()
+                .map(prep)
+                .collect::<Result<_, _>>()?,
+            scene
+                .novel_poses
+                .iter()
+                .map(prep)
+                .collect::<Result<_, _>>()?,
+            device,
+        )
+    }
+
+    /// The first novel view's and pose's ground truth (for the contact sheets).
+    fn firsts(&self) -> (Option<Vec<f32>>, Option<Vec<f32>>) {
+        (
+            self.views.first().map(|v| v.0.clone()),
+            self.poses.first().map(|v| v.0.clone()),
+        )
+    }
+
     fn new(trainer: &Trainer, scene: &SynthScene, device: &Device) -> Result<Self, BittError> {
         let size = trainer.config.nets.image_size;
         let prep = |v: &SynthView| -> Result<(Vec<f32>, ViewGeometry, TwoHandScene), BittError> {
@@ -228,7 +282,8 @@ fn score(
     truth: &Truth,
     c: &Candidate,
     visible: &[Vec<bool>; 2],
-    gt_textures: &[Vec<f32>; 2],
+    gt_textures: Option<&[Vec<f32>; 2]>,
+    lpips: Option<&LpipsVgg>,
 ) -> Result<(MethodScores, SheetImages), BittError> {
     let size = trainer.config.nets.image_size;
     let dims = [3, size, size];
@@ -239,7 +294,11 @@ fn score(
         let device = geometry.vertices[0].device();
         let light = move_light(&c.light, &train_camera, &hands.camera).to_light(&device);
         let img = render_geometry(trainer, geometry, &c.textures, &light)?;
-        Ok::<_, BittError>((image_metrics(&img, gt, dims), img))
+        let mut m = image_metrics(&img, gt, dims);
+        if let Some(net) = lpips {
+            m.lpips = Some(net.distance(&img, gt, dims, &device)?);
+        }
+        Ok::<_, BittError>((m, img))
     };
     let (input_view, _) = one(&truth.input)?;
     let mut views = Vec::new();
@@ -263,7 +322,9 @@ fn score(
             input_view,
             novel_views: crate::evaluate::mean_metrics(&views),
             novel_poses: crate::evaluate::mean_metrics(&poses),
-            texture: texel_errors(&c.textures, gt_textures, visible),
+            texture: gt_textures
+                .map(|gt| texel_errors(&c.textures, gt, visible))
+                .unwrap_or_default(),
             seconds: 0.0,
         },
         first,
@@ -310,6 +371,23 @@ pub fn texel_errors(
 /// per method: (first novel view, first novel pose).
 pub type SceneSheets = Vec<(Method, SheetImages)>;
 
+/// Where the scenes of an evaluation come from: how to build a trainer for a configuration,
+/// the ground truth of every scored view, and (synthetic only) the true textures.
+struct SceneSource<'a> {
+    trainer: &'a dyn Fn(&TrainConfig) -> Result<Trainer, BittError>,
+    truth: &'a dyn Fn(&Trainer) -> Result<Truth, BittError>,
+    gt_textures: Option<&'a [Vec<f32>; 2]>,
+}
+
+/// What [`evaluate_with`] returns: scores per method, contact-sheet renders, the training
+/// view's visible texels and the ground truth of the first novel view and pose.
+type Evaluated = (
+    BTreeMap<Method, MethodScores>,
+    SceneSheets,
+    [Vec<bool>; 2],
+    (Option<Vec<f32>>, Option<Vec<f32>>),
+);
+
 /// Trains and scores `methods` on one synthetic scene. `device` must be an autodiff device;
 /// `observer` sees every BiTT training iteration.
 #[allow(clippy::too_many_arguments)]
@@ -320,9 +398,101 @@ pub fn evaluate_scene(
     baseline: &BaselineConfig,
     pca: &TexturePca,
     methods: &[Method],
+    lpips: Option<&LpipsVgg>,
     device: &Device,
     observer: &mut dyn Observer,
 ) -> Result<(SceneResult, SceneSheets), BittError> {
+    let host = device.clone().inner();
+    let source = SceneSource {
+        trainer: &|cfg| synthetic_trainer(scene, cfg, pca, device),
+        truth: &|trainer| Truth::new(trainer, scene, &host),
+        gt_textures: Some(&scene.textures),
+    };
+    let (results, sheets, _, _) =
+        evaluate_with(&source, config, baseline, methods, lpips, device, observer)?;
+    Ok((
+        SceneResult {
+            format: SCENE_RESULT_FORMAT.to_string(),
+            seed: scene.seed,
+            setting,
+            preset: config.preset.to_string(),
+            iterations: config.iterations,
+            stats: scene.stats,
+            methods: results,
+        },
+        sheets,
+    ))
+}
+
+/// Contact-sheet material of a real scene: the ground truth (photograph times the annotated
+/// meshes' silhouettes) of the first novel view and novel pose, and each method's renders.
+#[derive(Debug, Clone)]
+pub struct RealSheets {
+    /// Ground truth of the first novel view.
+    pub view: Option<Vec<f32>>,
+    /// Ground truth of the first novel pose.
+    pub pose: Option<Vec<f32>>,
+    /// Per method: (first novel view, first novel pose).
+    pub methods: SceneSheets,
+}
+
+/// Trains and scores `methods` on one real multi-view scene (InterHand2.6M, annotated
+/// meshes: Table 1a's setting). As [`evaluate_scene`], but every view's ground truth is its
+/// photograph times the silhouettes of its annotated meshes, the light stays where it was
+/// in the capture's world, texture-space errors are absent (no true texture exists) and the
+/// Table-3 statistics come from the training view's visible texels. `trainer` builds a
+/// fresh trainer on the training view for a configuration; `id` names the scene in the
+/// results.
+#[allow(clippy::too_many_arguments)]
+pub fn evaluate_real_scene(
+    scene: &RealScene,
+    id: u64,
+    trainer: &dyn Fn(&TrainConfig) -> Result<Trainer, BittError>,
+    config: &TrainConfig,
+    baseline: &BaselineConfig,
+    methods: &[Method],
+    lpips: Option<&LpipsVgg>,
+    device: &Device,
+    observer: &mut dyn Observer,
+) -> Result<(SceneResult, RealSheets), BittError> {
+    let host = device.clone().inner();
+    let source = SceneSource {
+        trainer,
+        truth: &|t| Truth::real(t, scene, &host),
+        gt_textures: None,
+    };
+    let (results, sheets, visible, (view, pose)) =
+        evaluate_with(&source, config, baseline, methods, lpips, device, observer)?;
+    let stats = TexelStats::from_masks(&visible[0], &visible[1])
+        .map_err(|e| BittError::Invalid(format!("texel statistics: {e}")))?;
+    Ok((
+        SceneResult {
+            format: SCENE_RESULT_FORMAT.to_string(),
+            seed: id,
+            setting: MeshSetting::GtMesh,
+            preset: config.preset.to_string(),
+            iterations: config.iterations,
+            stats,
+            methods: results,
+        },
+        RealSheets {
+            view,
+            pose,
+            methods: sheets,
+        },
+    ))
+}
+
+/// The shared part of [`evaluate_scene`] and [`evaluate_real_scene`].
+fn evaluate_with(
+    source: &SceneSource<'_>,
+    config: &TrainConfig,
+    baseline: &BaselineConfig,
+    methods: &[Method],
+    lpips: Option<&LpipsVgg>,
+    device: &Device,
+    observer: &mut dyn Observer,
+) -> Result<Evaluated, BittError> {
     let mut results = BTreeMap::new();
     let mut sheets = Vec::new();
     // BiTT trainings; the full one also yields the HTML baseline.
@@ -339,7 +509,7 @@ pub fn evaluate_scene(
     for m in trainings {
         let cfg = m.bitt_config(config).expect("BiTT variant");
         let started = Instant::now();
-        let mut trainer = synthetic_trainer(scene, &cfg, pca, device)?;
+        let mut trainer = (source.trainer)(&cfg)?;
         trainer.train(None, observer)?;
         let outputs = trainer.forward()?;
         let avatar = Avatar::from_outputs(&trainer, &outputs)?;
@@ -348,7 +518,7 @@ pub fn evaluate_scene(
             avatar.visible[0].iter().map(|&v| v > 0.5).collect(),
             avatar.visible[1].iter().map(|&v| v > 0.5).collect(),
         ];
-        let truth = Truth::new(&trainer, scene, &device.clone().inner())?;
+        let truth = (source.truth)(&trainer)?;
         let mut candidates = Vec::new();
         if methods.contains(&m) {
             candidates.push((m, avatar.fine.clone(), seconds));
@@ -361,7 +531,7 @@ pub fn evaluate_scene(
                 textures,
                 light: avatar.light,
             };
-            let (mut s, sheet) = score(&trainer, &truth, &c, &visible, &scene.textures)?;
+            let (mut s, sheet) = score(&trainer, &truth, &c, &visible, source.gt_textures, lpips)?;
             s.seconds = secs;
             results.insert(method, s);
             sheets.push((method, sheet));
@@ -375,47 +545,34 @@ pub fn evaluate_scene(
     .into_iter()
     .filter(|(m, _)| methods.contains(m))
     .collect();
-    if !baselines.is_empty() {
-        let (trainer, truth, visible) = match context {
-            Some(c) => c,
-            None => {
-                let trainer = synthetic_trainer(scene, config, pca, device)?;
-                let truth = Truth::new(&trainer, scene, &device.clone().inner())?;
-                let visible = trainer
-                    .view
-                    .visible
-                    .clone()
-                    .map(|v| read(v.inner()).map(|x| x.iter().map(|&b| b > 0.5).collect()));
-                let [l, r] = visible;
-                (trainer, truth, [l?, r?])
-            }
-        };
-        for (method, b) in baselines {
-            let started = Instant::now();
-            let out = run_baseline(&trainer, b, baseline, device)?;
-            let seconds = started.elapsed().as_secs_f64();
-            let c = Candidate {
-                textures: out.textures,
-                light: out.light,
-            };
-            let (mut s, sheet) = score(&trainer, &truth, &c, &visible, &scene.textures)?;
-            s.seconds = seconds;
-            results.insert(method, s);
-            sheets.push((method, sheet));
+    let (trainer, truth, visible) = match context {
+        Some(c) => c,
+        None => {
+            let trainer = (source.trainer)(config)?;
+            let truth = (source.truth)(&trainer)?;
+            let visible = trainer
+                .view
+                .visible
+                .clone()
+                .map(|v| read(v.inner()).map(|x| x.iter().map(|&b| b > 0.5).collect()));
+            let [l, r] = visible;
+            (trainer, truth, [l?, r?])
         }
+    };
+    for (method, b) in baselines {
+        let started = Instant::now();
+        let out = run_baseline(&trainer, b, baseline, device)?;
+        let seconds = started.elapsed().as_secs_f64();
+        let c = Candidate {
+            textures: out.textures,
+            light: out.light,
+        };
+        let (mut s, sheet) = score(&trainer, &truth, &c, &visible, source.gt_textures, lpips)?;
+        s.seconds = seconds;
+        results.insert(method, s);
+        sheets.push((method, sheet));
     }
-    Ok((
-        SceneResult {
-            format: SCENE_RESULT_FORMAT.to_string(),
-            seed: scene.seed,
-            setting,
-            preset: config.preset.to_string(),
-            iterations: config.iterations,
-            stats: scene.stats,
-            methods: results,
-        },
-        sheets,
-    ))
+    Ok((results, sheets, visible, truth.firsts()))
 }
 
 /// The mean of a list of optional values (`None` when any is missing or the list is empty).
@@ -436,6 +593,9 @@ pub struct MeanMetrics {
     pub ssim: f64,
     /// Mean MS-SSIM.
     pub ms_ssim: Option<f64>,
+    /// Mean LPIPS-VGG (only when every scene has it).
+    #[serde(default)]
+    pub lpips: Option<f64>,
 }
 
 fn mean_metrics(all: &[ImageMetrics]) -> Option<MeanMetrics> {
@@ -445,6 +605,7 @@ fn mean_metrics(all: &[ImageMetrics]) -> Option<MeanMetrics> {
         psnr: m.psnr,
         ssim: m.ssim,
         ms_ssim: m.ms_ssim,
+        lpips: m.lpips,
     })
 }
 
@@ -476,6 +637,103 @@ pub struct Summary {
     pub seeds: Vec<u64>,
     /// Presets seen (normally one).
     pub presets: Vec<String>,
+    /// Per-scene paired differences behind the claims (see [`Paired`]).
+    #[serde(default)]
+    pub paired: Vec<Paired>,
+}
+
+/// The PSNR difference `a - b` of two methods scene by scene, over the scenes of one mesh
+/// setting that have both: one seed's training noise is about as large as the effects the
+/// claims are about, so the claims say how consistent a difference is, not only its mean.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Paired {
+    /// The mesh setting.
+    pub setting: MeshSetting,
+    /// The method compared.
+    pub a: Method,
+    /// The method it is compared with.
+    pub b: Method,
+    /// `true`: novel views only (Table 1); `false`: the mean of novel poses and novel views
+    /// (Table 4).
+    pub views_only: bool,
+    /// Scenes with both.
+    pub scenes: usize,
+    /// Mean of `a - b` (dB).
+    pub mean_db: f64,
+    /// Standard error of that mean (dB); `None` for a single scene.
+    pub stderr_db: Option<f64>,
+    /// Scenes where `a` has the higher PSNR.
+    pub wins: usize,
+}
+
+/// The comparisons the claims make: BiTT against each baseline on novel views, and each
+/// ablation step against the row above it on the mean of novel poses and views.
+const PAIRS: [(Method, Method, bool); 5] = [
+    (Method::Bitt, Method::Html, true),
+    (Method::Bitt, Method::HarpLike, true),
+    (Method::Bitt, Method::S2HandLike, true),
+    (Method::BittNoAlb, Method::BittNoSym, false),
+    (Method::Bitt, Method::BittNoAlb, false),
+];
+
+fn paired(results: &[SceneResult]) -> Vec<Paired> {
+    let psnr = |m: &MethodScores, views_only: bool| -> Option<f64> {
+        let v = m.novel_views?.psnr;
+        if views_only {
+            Some(v)
+        } else {
+            Some(0.5 * (v + m.novel_poses?.psnr))
+        }
+    };
+    let mut out = Vec::new();
+    for setting in MeshSetting::ALL {
+        for (a, b, views_only) in PAIRS {
+            let d: Vec<f64> = results
+                .iter()
+                .filter(|r| r.setting == setting)
+                .filter_map(|r| {
+                    Some(
+                        psnr(r.methods.get(&a)?, views_only)?
+                            - psnr(r.methods.get(&b)?, views_only)?,
+                    )
+                })
+                .collect();
+            if d.is_empty() {
+                continue;
+            }
+            let n = d.len() as f64;
+            let mean = d.iter().sum::<f64>() / n;
+            let stderr = (d.len() > 1).then(|| {
+                let var = d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
+                (var / n).sqrt()
+            });
+            out.push(Paired {
+                setting,
+                a,
+                b,
+                views_only,
+                scenes: d.len(),
+                mean_db: mean,
+                stderr_db: stderr,
+                wins: d.iter().filter(|&&x| x > 0.0).count(),
+            });
+        }
+    }
+    out
+}
+
+/// ` (per scene: +0.31 ± 0.20 dB, better in 3 of 4)` for the pair, or nothing.
+fn paired_note(s: &Summary, setting: MeshSetting, a: Method, b: Method) -> String {
+    s.paired
+        .iter()
+        .find(|p| p.setting == setting && p.a == a && p.b == b)
+        .map_or(String::new(), |p| {
+            let se = p.stderr_db.map_or(String::new(), |e| format!(" ± {e:.2}"));
+            format!(
+                " (per scene: {:+.2}{se} dB, better in {} of {})",
+                p.mean_db, p.wins, p.scenes
+            )
+        })
 }
 
 /// Mean texel statistics (Table 3, percent of texels).
@@ -555,6 +813,7 @@ pub fn summarize(results: &[SceneResult]) -> Summary {
         stats,
         seeds,
         presets,
+        paired: paired(results),
     }
 }
 
@@ -567,7 +826,7 @@ pub fn results_markdown(s: &Summary, lpips_note: &str) -> String {
     let mut md = String::new();
     md.push_str("# Evaluation results\n\n");
     md.push_str(&format!(
-        "{} synthetic scene(s) (seeds {}), preset {}. Every method is trained per scene on the \
+        "{} scene(s) (seeds or scene ids {}), preset {}. Every method is trained per scene on the \
          input view only. LPIPS: {lpips_note}. MS-SSIM needs images larger than 160 px (n/a \
          at 128 px). Image metrics are on the hand image (ground truth times its hand masks, \
          black elsewhere), so PSNRs are higher than the paper's.\n\n",
@@ -582,8 +841,9 @@ pub fn results_markdown(s: &Summary, lpips_note: &str) -> String {
     let row = |m: &Option<MeanMetrics>| -> String {
         match m {
             Some(m) => format!(
-                "{:.4} | n/a | {:.2} | {:.4} | {}",
+                "{:.4} | {} | {:.2} | {:.4} | {}",
                 m.l1,
+                fmt(m.lpips, 4),
                 m.psnr,
                 m.ssim,
                 fmt(m.ms_ssim, 4)
@@ -659,8 +919,11 @@ pub fn results_markdown(s: &Summary, lpips_note: &str) -> String {
         ] {
             if let Some(x) = per.get(&m).and_then(novel_mean) {
                 md.push_str(&format!(
-                    "| {marks} | {:.4} | n/a | {:.2} | {:.4} |\n",
-                    x.l1, x.psnr, x.ssim
+                    "| {marks} | {:.4} | {} | {:.2} | {:.4} |\n",
+                    x.l1,
+                    fmt(x.lpips, 4),
+                    x.psnr,
+                    x.ssim
                 ));
             }
         }
@@ -689,6 +952,7 @@ fn novel_mean(x: &MethodSummary) -> Option<MeanMetrics> {
         psnr: 0.5 * (p.psnr + v.psnr),
         ssim: 0.5 * (p.ssim + v.ssim),
         ms_ssim: p.ms_ssim.zip(v.ms_ssim).map(|(a, b)| 0.5 * (a + b)),
+        lpips: p.lpips.zip(v.lpips).map(|(a, b)| 0.5 * (a + b)),
     })
 }
 
@@ -704,13 +968,14 @@ pub fn claims(s: &Summary) -> Vec<String> {
                 if let Some(o) = nv(other) {
                     let ok = b.psnr > o.psnr && b.ssim > o.ssim;
                     out.push(format!(
-                        "{}: BiTT beats {} on novel views (PSNR {:.2} vs {:.2} dB, SSIM {:.4} vs {:.4}): {}.",
+                        "{}: BiTT beats {} on novel views (PSNR {:.2} vs {:.2} dB, SSIM {:.4} vs {:.4}){}: {}.",
                         setting.key(),
                         other.label(),
                         b.psnr,
                         o.psnr,
                         b.ssim,
                         o.ssim,
+                        paired_note(s, *setting, Method::Bitt, other),
                         verdict(ok)
                     ));
                 }
@@ -750,12 +1015,13 @@ pub fn claims(s: &Summary) -> Vec<String> {
                     get(w[1]).and_then(novel_mean),
                 ) {
                     out.push(format!(
-                        "ablation: {} improves on the row above (PSNR {:.2} vs {:.2} dB, SSIM {:.4} vs {:.4}): {}.",
+                        "ablation: {} improves on the row above (PSNR {:.2} vs {:.2} dB, SSIM {:.4} vs {:.4}){}: {}.",
                         w[1].label(),
                         b.psnr,
                         a.psnr,
                         b.ssim,
                         a.ssim,
+                        paired_note(s, MeshSetting::GtMesh, w[1], w[0]),
                         verdict(b.psnr > a.psnr && b.ssim > a.ssim)
                     ));
                 }
@@ -835,6 +1101,7 @@ mod tests {
             psnr,
             ssim: 0.9 + psnr / 1000.0,
             ms_ssim: None,
+            lpips: Some(psnr / 100.0),
         }
     }
 
@@ -889,6 +1156,23 @@ mod tests {
         assert_eq!(gt[&Method::Bitt].scenes, 2);
         assert!((gt[&Method::Bitt].novel_views.unwrap().psnr - 31.0).abs() < 1e-12);
         assert!((gt[&Method::Html].novel_poses.unwrap().psnr - 29.5).abs() < 1e-12);
+        // LPIPS is averaged like the other metrics and printed in the tables.
+        assert!((gt[&Method::Bitt].novel_views.unwrap().lpips.unwrap() - 0.31).abs() < 1e-12);
+        // Per scene BiTT - HTML: +2 and -1 dB with GT meshes.
+        let p = s
+            .paired
+            .iter()
+            .find(|p| p.setting == MeshSetting::GtMesh && p.b == Method::Html)
+            .unwrap();
+        assert_eq!((p.scenes, p.wins), (2, 1));
+        assert!((p.mean_db - 0.5).abs() < 1e-12);
+        assert!((p.stderr_db.unwrap() - 1.5).abs() < 1e-12);
+        let md = results_markdown(&s, "test weights");
+        assert!(
+            md.contains("(per scene: +0.50 ± 1.50 dB, better in 1 of 2)"),
+            "{md}"
+        );
+        assert!(md.contains("| 0.0100 | 0.3100 | 31.00 |"), "{md}");
         assert_eq!(s.seeds, vec![1, 2]);
         let stats = s.stats.unwrap();
         assert!((stats.left_visible - 30.0).abs() < 1e-9);

@@ -162,11 +162,13 @@ pub fn mean_metrics(all: &[ImageMetrics]) -> Option<ImageMetrics> {
     }
     let n = all.len() as f64;
     let ms: Vec<f64> = all.iter().filter_map(|m| m.ms_ssim).collect();
+    let lp: Vec<f64> = all.iter().filter_map(|m| m.lpips).collect();
     Some(ImageMetrics {
         l1: all.iter().map(|m| m.l1).sum::<f64>() / n,
         psnr: all.iter().map(|m| m.psnr).sum::<f64>() / n,
         ssim: all.iter().map(|m| m.ssim).sum::<f64>() / n,
         ms_ssim: (ms.len() == all.len()).then(|| ms.iter().sum::<f64>() / n),
+        lpips: (lp.len() == all.len()).then(|| lp.iter().sum::<f64>() / n),
     })
 }
 

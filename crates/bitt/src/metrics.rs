@@ -24,6 +24,10 @@ pub struct ImageMetrics {
     /// Multi-scale SSIM (5 scales); `None` for images smaller than 161 pixels per side, where
     /// the standard definition does not apply.
     pub ms_ssim: Option<f64>,
+    /// LPIPS-VGG; `None` when no LPIPS weights were given (never estimated). Filled in by the
+    /// callers that hold an [`crate::lpips::LpipsVgg`].
+    #[serde(default)]
+    pub lpips: Option<f64>,
 }
 
 /// Gaussian window size and sigma of SSIM.
@@ -113,6 +117,7 @@ pub fn image_metrics_with(
         psnr: psnr_of_mse(mse),
         ssim: ssim(a, b, [c, h, w], window).unwrap_or(f64::NAN),
         ms_ssim: ms_ssim(a, b, [c, h, w], window),
+        lpips: None,
     }
 }
 
@@ -154,6 +159,7 @@ pub fn masked_image_metrics(
         psnr: psnr_of_mse(mse),
         ssim: ssim(&am, &bm, [c, h, w], window).unwrap_or(f64::NAN),
         ms_ssim: ms_ssim(&am, &bm, [c, h, w], window),
+        lpips: None,
     })
 }
 

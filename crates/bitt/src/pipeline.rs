@@ -151,6 +151,18 @@ pub fn consistency_lights(estimated: &PointLight) -> [PointLight; 2] {
     [white, coloured]
 }
 
+/// How the albedo consistency renders enter the forward pass.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Consistency {
+    /// No consistency renders (`lambda_alb = 0`).
+    Off,
+    /// The relit coarse renders are constants: `L_alb` trains only the albedo network `A`.
+    AlbedoOnly,
+    /// The relit coarse renders keep their graph, so `L_alb` also reaches the light and HTML
+    /// networks (the reference implementation).
+    ThroughScene,
+}
+
 /// Everything one forward pass produces (batch 1; compact textures are `[1, 3, T]`).
 #[derive(Debug, Clone)]
 pub struct Outputs {
@@ -194,8 +206,9 @@ pub fn forward(
     gather: &LayoutGather,
     view: &TrainingView,
     settings: &RenderSettings,
-    with_consistency: bool,
+    consistency: Consistency,
 ) -> Result<Outputs, BittError> {
+    let with_consistency = consistency != Consistency::Off;
     let [_, _, h, w] = view.image.dims();
     let light = point_light(&nets.light.predict(view.image.clone()));
     let coeffs = nets.html.predict(view.hand_image.clone());
@@ -223,9 +236,16 @@ pub fn forward(
     let coarse_image = render_with(coarse.clone(), &light)?;
     let mut albedo_batch = vec![view.hand_image.clone()];
     if with_consistency {
-        albedo_batch.push(coarse_image.clone());
-        for l in consistency_lights(&light) {
-            albedo_batch.push(render_with(coarse.clone(), &l)?);
+        let scene_graph = consistency == Consistency::ThroughScene;
+        let keep = |x: Tensor<4>| if scene_graph { x } else { x.detach() };
+        let (coarse_c, light_c) = if scene_graph {
+            (coarse.clone(), light.clone())
+        } else {
+            (coarse.clone().map(Tensor::detach), light.detach())
+        };
+        albedo_batch.push(keep(coarse_image.clone()));
+        for l in consistency_lights(&light_c) {
+            albedo_batch.push(render_with(coarse_c.clone(), &l)?);
         }
     }
     let albedos = nets.albedo.forward(Tensor::cat(albedo_batch, 0));

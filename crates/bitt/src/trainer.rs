@@ -168,7 +168,7 @@ impl Trainer {
             &self.gather,
             &self.view,
             &self.settings,
-            self.config.loss.alb > 0.0,
+            self.config.loss.consistency(),
         )
     }
 

@@ -102,6 +102,16 @@ impl LightValues {
 }
 
 impl PointLight {
+    /// The same light cut from the autodiff graph: no gradient flows back through it.
+    pub fn detach(&self) -> Self {
+        PointLight {
+            ambient: self.ambient.clone().detach(),
+            diffuse: self.diffuse.clone().detach(),
+            specular: self.specular.clone().detach(),
+            location: self.location.clone().detach(),
+        }
+    }
+
     /// A light from a `[12]` tensor (ambient, diffuse, specular, location), keeping its
     /// gradient.
     ///
