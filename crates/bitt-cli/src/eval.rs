@@ -8,11 +8,11 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use bitt::baselines::BaselineConfig;
 use bitt::benchmark::{
-    MeshSetting, Method, SCENE_RESULT_FORMAT, SceneResult, evaluate_real_scene, evaluate_scene,
-    results_markdown, summarize,
+    ContactSheets, MeshSetting, Method, SCENE_RESULT_FORMAT, SceneResult, evaluate_real_scene,
+    evaluate_scene, results_markdown, summarize,
 };
 use bitt::outputs::{contact_sheet, write_png};
-use bitt::real::{HandSource, PriorSource, interhand_views, load_models, real_trainer};
+use bitt::real::{interhand_views, load_models, real_trainer};
 use bitt::run::texture_prior;
 use bitt::{Observer, Progress, TrainConfig};
 use bitt_mesh::export::write_atomically;
@@ -21,6 +21,7 @@ use bitt_nets::Preset;
 use bitt_synth::{BENCHMARK_SCENES, MeshNoise, SynthConfig};
 
 use crate::device::DeviceName;
+use crate::train_scene::{sources, training_config};
 use bitt::lpips::LpipsVgg;
 
 /// Where the evaluated scenes come from.
@@ -197,14 +198,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     {
         bail!("--root, --model-dir and --html-dir are for --dataset interhand");
     }
-    let mut config = match &args.config {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("reading {}", path.display()))?;
-            TrainConfig::from_json(&text, path)?
-        }
-        None => TrainConfig::preset(args.preset),
-    };
+    let mut config = training_config(args.config.as_deref(), args.preset)?;
     if let Some(n) = args.iterations {
         config.iterations = n;
     }
@@ -309,40 +303,13 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             &mut bar,
         )
         .with_context(|| format!("scene {seed:#x} ({})", setting.key()))?;
-        // Contact sheet: ground truth then each method, novel view (top) and pose (bottom).
-        let size = config.nets.image_size;
-        let gt = |v: &bitt_synth::SynthView| -> Vec<f32> {
-            let hw = v.masks[0].len();
-            (0..3 * hw)
-                .map(|i| v.image[i] * (v.masks[0][i % hw] + v.masks[1][i % hw]).min(1.0))
-                .collect()
-        };
-        if let (Some(v), Some(p)) = (scene.novel_views.first(), scene.novel_poses.first())
-            && v.masks[0].len() == size * size
-        {
-            let mut panels = vec![scene.train.image.clone(), gt(v)];
-            panels.extend(sheets.iter().map(|(_, s)| s.0.clone()));
-            panels.push(scene.train.image.clone());
-            panels.push(gt(p));
-            panels.extend(sheets.iter().map(|(_, s)| s.1.clone()));
-            let (img, h, w) = contact_sheet(&panels, size, size, 2 + sheets.len());
-            let dir = args.out.join("sheets");
-            std::fs::create_dir_all(&dir)?;
-            write_png(
-                &dir.join(format!("{}-{seed:016x}.png", setting.key())),
-                &img,
-                h,
-                w,
-            )?;
-            let legend: Vec<&str> = ["input", "ground truth"]
-                .into_iter()
-                .chain(sheets.iter().map(|(m, _)| m.key()))
-                .collect();
-            write_atomically(
-                &dir.join("columns.txt"),
-                format!("{}\n", legend.join(" | ")).as_bytes(),
-            )?;
-        }
+        write_sheet(
+            &args.out,
+            &format!("{}-{seed:016x}", setting.key()),
+            &scene.train.image,
+            &sheets,
+            config.nets.image_size,
+        )?;
         write_atomically(
             &result_path(&args.out, setting, seed),
             serde_json::to_string_pretty(&result)?.as_bytes(),
@@ -355,6 +322,38 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         started.elapsed().as_secs_f64() / 60.0,
         args.out.display()
     );
+    Ok(())
+}
+
+/// `sheets/{name}.png`: the input, the ground truth and each method at the first novel view
+/// (top row) and the first novel pose (bottom row); `sheets/columns.txt` names the columns.
+fn write_sheet(
+    out: &Path,
+    name: &str,
+    input: &[f32],
+    sheets: &ContactSheets,
+    size: usize,
+) -> Result<()> {
+    let (Some(view), Some(pose)) = (&sheets.view, &sheets.pose) else {
+        return Ok(());
+    };
+    let mut panels = vec![input.to_vec(), view.clone()];
+    panels.extend(sheets.methods.iter().map(|(_, s)| s.0.clone()));
+    panels.push(input.to_vec());
+    panels.push(pose.clone());
+    panels.extend(sheets.methods.iter().map(|(_, s)| s.1.clone()));
+    let (img, h, w) = contact_sheet(&panels, size, size, 2 + sheets.methods.len());
+    let dir = out.join("sheets");
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    write_png(&dir.join(format!("{name}.png")), &img, h, w)?;
+    let legend: Vec<&str> = ["input", "ground truth"]
+        .into_iter()
+        .chain(sheets.methods.iter().map(|(m, _)| m.key()))
+        .collect();
+    write_atomically(
+        &dir.join("columns.txt"),
+        format!("{}\n", legend.join(" | ")).as_bytes(),
+    )?;
     Ok(())
 }
 
@@ -395,14 +394,7 @@ fn run_interhand(
              setting without them needs a mesh estimator such as IntagHand"
         );
     }
-    let hands = match &args.model_dir {
-        Some(dir) => HandSource::Mano { dir: dir.clone() },
-        None => HandSource::Procedural,
-    };
-    let prior = match &args.html_dir {
-        Some(dir) => PriorSource::Html { dir: dir.clone() },
-        None => PriorSource::Procedural,
-    };
+    let (hands, prior) = sources(args.model_dir.as_deref(), args.html_dir.as_deref());
     let models = load_models(&hands, &prior)?;
     eprintln!(
         "reading InterHand2.6M {} annotations below {}",
@@ -488,17 +480,13 @@ fn run_interhand(
             &views, id, &make, e.config, e.baseline, e.methods, e.lpips, device, &mut bar,
         )
         .with_context(|| format!("InterHand2.6M capture {capture}"))?;
-        if let (Some(v), Some(p)) = (&sheets.view, &sheets.pose) {
-            let mut panels = vec![views.train.image.clone(), v.clone()];
-            panels.extend(sheets.methods.iter().map(|(_, s)| s.0.clone()));
-            panels.push(views.train.image.clone());
-            panels.push(p.clone());
-            panels.extend(sheets.methods.iter().map(|(_, s)| s.1.clone()));
-            let (img, h, w) = contact_sheet(&panels, size, size, 2 + sheets.methods.len());
-            let dir = args.out.join("sheets");
-            std::fs::create_dir_all(&dir)?;
-            write_png(&dir.join(format!("gt-mesh-{id:016x}.png")), &img, h, w)?;
-        }
+        write_sheet(
+            &args.out,
+            &format!("gt-mesh-{id:016x}"),
+            &views.train.image,
+            &sheets,
+            size,
+        )?;
         write_atomically(&path, serde_json::to_string_pretty(&result)?.as_bytes())?;
     }
     eprintln!();

@@ -183,14 +183,7 @@ enum Input {
 
 /// The hands and prior the real-data options ask for.
 fn real_sources(args: &TrainSceneArgs) -> (HandSource, PriorSource) {
-    let hands = match &args.model_dir {
-        Some(dir) => HandSource::Mano { dir: dir.clone() },
-        None => HandSource::Procedural,
-    };
-    let prior = match &args.html_dir {
-        Some(dir) => PriorSource::Html { dir: dir.clone() },
-        None => PriorSource::Procedural,
-    };
+    let (hands, prior) = sources(args.model_dir.as_deref(), args.html_dir.as_deref());
     (hands, prior)
 }
 
@@ -341,6 +334,38 @@ fn resumed(
     Ok((trainer, input))
 }
 
+/// The configuration of `--config FILE` (a full `TrainConfig`), else the named preset.
+pub(crate) fn training_config(config: Option<&Path>, preset: Preset) -> Result<TrainConfig> {
+    match config {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            Ok(TrainConfig::from_json(&text, path)?)
+        }
+        None => Ok(TrainConfig::preset(preset)),
+    }
+}
+
+/// Hand models and texture prior of `--model-dir` / `--html-dir` (procedural without them).
+pub(crate) fn sources(
+    model_dir: Option<&Path>,
+    html_dir: Option<&Path>,
+) -> (HandSource, PriorSource) {
+    let hands = match model_dir {
+        Some(dir) => HandSource::Mano {
+            dir: dir.to_path_buf(),
+        },
+        None => HandSource::Procedural,
+    };
+    let prior = match html_dir {
+        Some(dir) => PriorSource::Html {
+            dir: dir.to_path_buf(),
+        },
+        None => PriorSource::Procedural,
+    };
+    (hands, prior)
+}
+
 /// `bitt train-scene`.
 pub fn run(args: &TrainSceneArgs) -> Result<()> {
     let started = Instant::now();
@@ -358,14 +383,7 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
                     args.out.display()
                 );
             }
-            let mut config = match &args.config {
-                Some(path) => {
-                    let text = std::fs::read_to_string(path)
-                        .with_context(|| format!("reading {}", path.display()))?;
-                    TrainConfig::from_json(&text, path)?
-                }
-                None => TrainConfig::preset(args.preset),
-            };
+            let mut config = training_config(args.config.as_deref(), args.preset)?;
             if let Some(n) = args.iterations {
                 config.iterations = n;
             }

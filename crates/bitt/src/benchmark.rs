@@ -250,27 +250,28 @@ impl Truth {
         )
     }
 
+    /// A synthetic scene: each view's image times its true hand masks.
     fn new(trainer: &Trainer, scene: &SynthScene, device: &Device) -> Result<Self, BittError> {
         let size = trainer.config.nets.image_size;
-        let prep = |v: &SynthView| -> Result<(Vec<f32>, ViewGeometry, TwoHandScene), BittError> {
+        let prep = |v: &SynthView| -> Result<(Vec<f32>, TwoHandScene), BittError> {
             let (image, masks, hands) = fit_synthetic_view(v, size)?;
-            let gt = hand_image(&image, &masks, size * size)?;
-            let geometry = ViewGeometry::new(&trainer.assets, &hands, device)?;
-            Ok((gt, geometry, hands))
+            Ok((hand_image(&image, &masks, size * size)?, hands))
         };
-        Ok(Truth {
-            input: prep(&scene.train)?,
-            views: scene
+        Self::from_views(
+            trainer,
+            prep(&scene.train)?,
+            scene
                 .novel_views
                 .iter()
                 .map(prep)
                 .collect::<Result<_, _>>()?,
-            poses: scene
+            scene
                 .novel_poses
                 .iter()
                 .map(prep)
                 .collect::<Result<_, _>>()?,
-        })
+            device,
+        )
     }
 }
 
@@ -401,14 +402,14 @@ pub fn evaluate_scene(
     lpips: Option<&LpipsVgg>,
     device: &Device,
     observer: &mut dyn Observer,
-) -> Result<(SceneResult, SceneSheets), BittError> {
+) -> Result<(SceneResult, ContactSheets), BittError> {
     let host = device.clone().inner();
     let source = SceneSource {
         trainer: &|cfg| synthetic_trainer(scene, cfg, pca, device),
         truth: &|trainer| Truth::new(trainer, scene, &host),
         gt_textures: Some(&scene.textures),
     };
-    let (results, sheets, _, _) =
+    let (results, sheets, _, (view, pose)) =
         evaluate_with(&source, config, baseline, methods, lpips, device, observer)?;
     Ok((
         SceneResult {
@@ -420,14 +421,19 @@ pub fn evaluate_scene(
             stats: scene.stats,
             methods: results,
         },
-        sheets,
+        ContactSheets {
+            view,
+            pose,
+            methods: sheets,
+        },
     ))
 }
 
-/// Contact-sheet material of a real scene: the ground truth (photograph times the annotated
-/// meshes' silhouettes) of the first novel view and novel pose, and each method's renders.
+/// Contact-sheet material of a scene: the ground-truth hand image of the first novel view
+/// and novel pose (for real scenes the photograph times the annotated meshes' silhouettes),
+/// and each method's renders of them.
 #[derive(Debug, Clone)]
-pub struct RealSheets {
+pub struct ContactSheets {
     /// Ground truth of the first novel view.
     pub view: Option<Vec<f32>>,
     /// Ground truth of the first novel pose.
@@ -454,7 +460,7 @@ pub fn evaluate_real_scene(
     lpips: Option<&LpipsVgg>,
     device: &Device,
     observer: &mut dyn Observer,
-) -> Result<(SceneResult, RealSheets), BittError> {
+) -> Result<(SceneResult, ContactSheets), BittError> {
     let host = device.clone().inner();
     let source = SceneSource {
         trainer,
@@ -475,7 +481,7 @@ pub fn evaluate_real_scene(
             stats,
             methods: results,
         },
-        RealSheets {
+        ContactSheets {
             view,
             pose,
             methods: sheets,
