@@ -1,7 +1,7 @@
 //! `cargo xtask bench <what> [ARGS]`: timings measured side by side with a baseline in the
 //! same run, printed with their ratio.
 //!
-//! - `bench btr [--preset P] [--runs N] [--conv im2col|shifted-sum|burn]`: one forward +
+//! - `bench btr [--preset P] [--runs N] [--conv fused|shifted-sum|im2col|burn]`: one forward +
 //!   backward of BTR for both hands at the preset's texel count (206,330 for `paper`) on
 //!   flex, against the PyTorch module of `xtask/bench/nets_torch.py` on the CPU.
 //! - `bench albedo [--preset P] [--runs N]`: the same for the albedo U-Net at the preset's

@@ -25,10 +25,12 @@ pub enum BenchNet {
 pub enum ConvChoice {
     /// One matmul over stacked shifted views.
     Im2col,
-    /// One matmul per kernel tap, summed (the default).
+    /// One matmul per kernel tap, summed, from burn tensor operations.
     ShiftedSum,
     /// burn's conv1d.
     Burn,
+    /// Conv + group norm + SiLU as one custom operation on flex (the default).
+    Fused,
 }
 
 impl From<ConvChoice> for ConvImpl {
@@ -37,6 +39,7 @@ impl From<ConvChoice> for ConvImpl {
             ConvChoice::Im2col => ConvImpl::Im2col,
             ConvChoice::ShiftedSum => ConvImpl::ShiftedSum,
             ConvChoice::Burn => ConvImpl::Burn,
+            ConvChoice::Fused => ConvImpl::Fused,
         }
     }
 }
@@ -74,7 +77,7 @@ pub struct BenchNetsArgs {
     #[arg(long)]
     texels: Option<usize>,
     /// How BTR's 1-D convolutions are evaluated.
-    #[arg(long, value_enum, default_value = "shifted-sum")]
+    #[arg(long, value_enum, default_value = "fused")]
     conv: ConvChoice,
 }
 

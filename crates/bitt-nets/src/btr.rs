@@ -36,6 +36,7 @@ use burn::tensor::{Device, Tensor};
 
 use crate::NetsError;
 use crate::conv1d::{ConvImpl, TexelConv, TexelConvConfig};
+use crate::fused::{self, BlockParams};
 
 /// Configuration of [`Btr`].
 #[derive(Config, Debug)]
@@ -60,8 +61,9 @@ pub struct BtrConfig {
     /// (the "w/o bi-directional" ablation, paper Sec. 4.3), same parameters.
     #[config(default = true)]
     pub bidirectional: bool,
-    /// How the 1-D convolutions are evaluated (same function, different speed).
-    #[config(default = "ConvImpl::ShiftedSum")]
+    /// How the 1-D convolutions are evaluated (same function, different speed). The default,
+    /// [`ConvImpl::Fused`], runs each conv + group norm + SiLU as one operation on flex.
+    #[config(default = "ConvImpl::Fused")]
     pub conv: ConvImpl,
 }
 
@@ -119,7 +121,24 @@ impl ResBlock1d {
 /// `E[z]`, `E[z^2]` of the bias-free output `z`), and the normalisation becomes one
 /// per-channel affine map `z scale + shift`. The variance is `E[y^2] - E[y]^2` (clamped at
 /// zero), computed in `f32` like the rest.
+///
+/// With [`ConvImpl::Fused`] on flex the whole block is one custom operation (`fused`).
 fn conv_norm_silu(conv: &TexelConv, norm: &GroupNorm, x: Tensor<3>) -> Tensor<3> {
+    if conv.implementation == ConvImpl::Fused
+        && let (Some(gamma), Some(beta)) = (&norm.gamma, &norm.beta)
+    {
+        let params = BlockParams {
+            weight: conv.weight.val(),
+            bias: conv.bias.val(),
+            gamma: gamma.val(),
+            beta: beta.val(),
+            groups: norm.num_groups,
+            epsilon: norm.epsilon,
+        };
+        if let Some(y) = fused::conv_norm_silu(&x, &params) {
+            return y;
+        }
+    }
     let z = conv.forward_without_bias(x);
     let [n, c, _] = z.dims();
     let (g, eps) = (norm.num_groups, norm.epsilon);
@@ -415,41 +434,136 @@ mod tests {
         }
     }
 
-    /// The folded conv + group norm + SiLU equals the plain composition, values and
-    /// gradients.
+    /// The folded conv + group norm + SiLU and the fused operation (flex only) equal the plain
+    /// composition, values and gradients (input, weight, bias, gamma, beta), also for a
+    /// non-contiguous input.
     #[test]
-    fn folded_norm_matches_burn_group_norm() {
+    fn folded_and_fused_blocks_match_burn_group_norm() {
         use burn::module::Param;
         for (name, device) in devices() {
             let ad = device.clone().autodiff();
-            let conv = TexelConvConfig::new(4, 16, 3).init(&ad);
+            let conv = TexelConvConfig::new(4, 16, 3)
+                .with_implementation(ConvImpl::ShiftedSum)
+                .init(&ad);
             let mut norm = GroupNormConfig::new(8, 16).init(&ad);
             norm.gamma = Some(Param::from_tensor(random([16], 11, &ad).add_scalar(1.0)));
             norm.beta = Some(Param::from_tensor(random([16], 12, &ad)));
-            // An offset input makes the bias and the mean matter.
-            let x = random([2, 4, 19], 13, &ad).add_scalar(0.7).require_grad();
-            let w = random([2, 16, 19], 14, &ad);
-            let mut results = Vec::new();
-            for folded in [false, true] {
-                let y = if folded {
-                    conv_norm_silu(&conv, &norm, x.clone())
+            for transposed in [false, true] {
+                // An offset input makes the bias and the mean matter.
+                let x = if transposed {
+                    random([2, 19, 4], 13, &ad).swap_dims(1, 2)
                 } else {
-                    silu(norm.forward(conv.forward(x.clone())))
+                    random([2, 4, 19], 13, &ad)
                 };
-                let grads = (y.clone() * w.clone()).sum().backward();
-                let gamma = norm.gamma.as_ref().unwrap();
-                results.push([
-                    to_vec(y.inner()),
-                    to_vec(x.grad(&grads).unwrap()),
-                    to_vec(conv.weight.grad(&grads).unwrap()),
-                    to_vec(conv.bias.grad(&grads).unwrap()),
-                    to_vec(gamma.grad(&grads).unwrap()),
-                ]);
-            }
-            for (a, b) in results[1].iter().zip(&results[0]) {
-                assert_close(a, b, 2e-4, name);
+                let x = x.add_scalar(0.7).require_grad();
+                let w = random([2, 16, 19], 14, &ad);
+                let mut results = Vec::new();
+                for variant in ["composed", "folded", "fused"] {
+                    let y = match variant {
+                        "composed" => silu(norm.forward(conv.forward(x.clone()))),
+                        "folded" => conv_norm_silu(&conv, &norm, x.clone()),
+                        _ => {
+                            let params = BlockParams {
+                                weight: conv.weight.val(),
+                                bias: conv.bias.val(),
+                                gamma: norm.gamma.as_ref().unwrap().val(),
+                                beta: norm.beta.as_ref().unwrap().val(),
+                                groups: 8,
+                                epsilon: norm.epsilon,
+                            };
+                            match fused::conv_norm_silu(&x, &params) {
+                                Some(y) => y,
+                                None => {
+                                    assert_ne!(name, "flex", "flex must take the fused path");
+                                    continue;
+                                }
+                            }
+                        }
+                    };
+                    let grads = (y.clone() * w.clone()).sum().backward();
+                    let (gamma, beta) = (norm.gamma.as_ref().unwrap(), norm.beta.as_ref().unwrap());
+                    results.push((
+                        variant,
+                        [
+                            to_vec(y.inner()),
+                            to_vec(x.grad(&grads).unwrap()),
+                            to_vec(conv.weight.grad(&grads).unwrap()),
+                            to_vec(conv.bias.grad(&grads).unwrap()),
+                            to_vec(gamma.grad(&grads).unwrap()),
+                            to_vec(beta.grad(&grads).unwrap()),
+                        ],
+                    ));
+                }
+                assert_eq!(results.len(), if name == "flex" { 3 } else { 2 });
+                let (_, reference) = &results[0];
+                for (variant, got) in &results[1..] {
+                    for (a, b) in got.iter().zip(reference) {
+                        assert_close(a, b, 2e-4, &format!("{name} {variant} T={transposed}"));
+                    }
+                }
             }
         }
+    }
+
+    /// The fused path without autodiff (inference on flex) and with an input that does not
+    /// require a gradient gives the same values.
+    #[test]
+    fn fused_block_without_gradients() {
+        let device = Device::flex();
+        let conv = TexelConvConfig::new(3, 8, 3).init(&device);
+        let norm = GroupNormConfig::new(8, 8).init(&device);
+        let x = random([2, 3, 33], 21, &device);
+        let fused = conv_norm_silu(&conv, &norm, x.clone());
+        let composed = silu(norm.forward(conv.forward(x)));
+        assert_close(&to_vec(fused), &to_vec(composed), 2e-5, "inference");
+        // Autodiff device, untracked input: only the parameters get gradients.
+        let ad = device.autodiff();
+        let conv = TexelConvConfig::new(3, 8, 3).init(&ad);
+        let norm = GroupNormConfig::new(4, 8).init(&ad);
+        let x = random([1, 3, 10], 22, &ad);
+        let grads = conv_norm_silu(&conv, &norm, x.clone()).sum().backward();
+        assert!(x.grad(&grads).is_none());
+        let dw = to_vec(conv.weight.grad(&grads).expect("weight grad"));
+        let reference = {
+            let conv2 = TexelConvConfig::new(3, 8, 3)
+                .with_implementation(ConvImpl::ShiftedSum)
+                .init(&ad);
+            let conv2 = TexelConv {
+                weight: burn::module::Param::from_tensor(conv.weight.val().detach()),
+                bias: burn::module::Param::from_tensor(conv.bias.val().detach()),
+                ..conv2
+            };
+            let g = silu(norm.forward(conv2.forward(x))).sum().backward();
+            to_vec(conv2.weight.grad(&g).unwrap())
+        };
+        assert_close(&dw, &reference, 2e-4, "untracked input");
+    }
+
+    /// The whole network with the fused blocks equals the composed one on flex.
+    #[test]
+    fn fused_btr_matches_composed_btr() {
+        let ad = Device::flex().autodiff();
+        let fused = tiny(true).init(&ad);
+        // Same weights: the fused network's record loaded into a composed one.
+        let composed = tiny(true)
+            .with_conv(ConvImpl::ShiftedSum)
+            .init(&ad)
+            .load_record(fused.clone().into_record());
+        assert_eq!(composed.stem.conv1.implementation, ConvImpl::ShiftedSum);
+        assert_eq!(fused.stem.conv1.implementation, ConvImpl::Fused);
+        let (l, r) = (
+            random([1, 3, 37], 31, &ad).require_grad(),
+            random([1, 3, 37], 32, &ad),
+        );
+        let mut outs = Vec::new();
+        for net in [&fused, &composed] {
+            let out = net.forward(l.clone(), r.clone());
+            let loss = (out.left.clone() * 0.3 + out.right.clone()).sum();
+            let grads = loss.backward();
+            outs.push((to_vec(out.left.inner()), to_vec(l.grad(&grads).unwrap())));
+        }
+        assert_close(&outs[0].0, &outs[1].0, 1e-4, "BTR output");
+        assert_close(&outs[0].1, &outs[1].1, 1e-3, "BTR input gradient");
     }
 
     #[test]

@@ -36,6 +36,10 @@ pub enum ConvImpl {
     ShiftedSum,
     /// burn's `conv1d` (reference; slow on CPU at BTR's sizes).
     Burn,
+    /// As [`ConvImpl::ShiftedSum`], and inside BTR's ResNet blocks the convolution, group
+    /// norm and SiLU run as one custom operation with a hand-written backward pass when the
+    /// tensors live on flex (the CPU default; see `fused`). The default.
+    Fused,
 }
 
 /// Configuration of a [`TexelConv`]: a stride-1, "same"-padded 1-D convolution with bias.
@@ -48,7 +52,7 @@ pub struct TexelConvConfig {
     /// Kernel size; odd, padded by `kernel_size / 2` zeros on each side (BTR uses 3 and 1).
     pub kernel_size: usize,
     /// How the convolution is evaluated.
-    #[config(default = "ConvImpl::ShiftedSum")]
+    #[config(default = "ConvImpl::Fused")]
     pub implementation: ConvImpl,
 }
 
@@ -137,7 +141,7 @@ impl TexelConv {
                 };
                 w.matmul(cols)
             }
-            ConvImpl::ShiftedSum => {
+            ConvImpl::ShiftedSum | ConvImpl::Fused => {
                 let xp = if k == 1 {
                     x
                 } else {

@@ -20,6 +20,7 @@ pub mod btr;
 pub mod conv1d;
 pub mod encoder;
 pub mod error;
+mod fused;
 pub mod html_encoder;
 pub mod light;
 pub mod preset;

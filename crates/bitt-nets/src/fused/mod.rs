@@ -1,0 +1,251 @@
+//! BTR's `SiLU(GroupNorm(conv(x)))` as one custom burn operation on the flex backend, with a
+//! hand-written backward pass.
+//!
+//! Composed from burn tensor operations (`btr::conv_norm_silu`), this block allocates and
+//! walks about a dozen `[N, C, T]` buffers forward and as many backward, mostly on one
+//! thread; at BTR's sizes (`T = 206,330`) that, not the matrix products, dominated a
+//! training step on the CPU. [`conv_norm_silu`] computes the same function with the kernels
+//! of [`kernels`]: three GEMMs accumulating into one buffer for the convolution (no padding
+//! copies), one pass for the group moments and one for the normalisation and SiLU, all rows
+//! in parallel; the backward pass is two passes plus three GEMMs for each of `dx` and `dW`.
+//! It keeps only its input `x` and the convolution's output `z` for the backward pass.
+//!
+//! The operation is used when the tensors live on flex (`Device::flex()`, with or without
+//! autodiff) in `f32`; on every other backend [`conv_norm_silu`] returns `None` and the caller
+//! composes burn operations, which compute the same function. Tests compare both, values and
+//! gradients, and the kernels against naive loops and finite differences.
+
+mod gemm;
+pub(crate) mod kernels;
+
+use std::sync::Arc;
+
+use burn::backend::Flex;
+use burn::backend::autodiff::Autodiff;
+use burn::backend::autodiff::checkpoint::base::Checkpointer;
+use burn::backend::autodiff::checkpoint::strategy::NoCheckpointing;
+use burn::backend::autodiff::grads::Gradients;
+use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::flex::FlexTensor;
+use burn::tensor::{DType, Tensor, TensorData};
+
+use kernels::{ConvDims, NormDims, NormStats};
+
+/// Flex with gradients, as `Device::flex().autodiff()` creates it (no checkpointing).
+type FlexAutodiff = Autodiff<Flex, NoCheckpointing>;
+
+/// The parameters of one block, as tensors on the block's device.
+#[derive(Debug, Clone)]
+pub(crate) struct BlockParams {
+    /// `[C_out, C_in, K]`.
+    pub weight: Tensor<3>,
+    /// Convolution bias, `[C_out]`.
+    pub bias: Tensor<1>,
+    /// Group norm scale, `[C_out]`.
+    pub gamma: Tensor<1>,
+    /// Group norm shift, `[C_out]`.
+    pub beta: Tensor<1>,
+    pub groups: usize,
+    pub epsilon: f64,
+}
+
+/// `SiLU(GroupNorm(conv(x) + bias))` on flex; `None` (nothing computed) on other backends or
+/// dtypes.
+///
+/// # Shapes
+/// - `x`: `[N, C_in, T]`
+/// - output: `[N, C_out, T]`
+pub(crate) fn conv_norm_silu(x: &Tensor<3>, p: &BlockParams) -> Option<Tensor<3>> {
+    let [c_out, c_in, kernel] = p.weight.dims();
+    let [batch, x_channels, len] = x.dims();
+    if x_channels != c_in
+        || kernel % 2 == 0
+        || len == 0
+        || p.groups == 0
+        || !c_out.is_multiple_of(p.groups)
+    {
+        return None;
+    }
+    let conv = ConvDims {
+        batch,
+        c_in,
+        c_out,
+        len,
+        kernel,
+    };
+    let norm = NormDims {
+        batch,
+        channels: c_out,
+        len,
+        groups: p.groups,
+        epsilon: p.epsilon,
+    };
+    if let Ok(xa) = x.clone().try_into_primitive::<FlexAutodiff>() {
+        let weight = p.weight.clone().try_into_primitive::<FlexAutodiff>().ok()?;
+        let bias = p.bias.clone().try_into_primitive::<FlexAutodiff>().ok()?;
+        let gamma = p.gamma.clone().try_into_primitive::<FlexAutodiff>().ok()?;
+        let beta = p.beta.clone().try_into_primitive::<FlexAutodiff>().ok()?;
+        let inputs = [&xa, &weight, &bias, &gamma, &beta];
+        if inputs.iter().any(|t| t.primitive().dtype() != DType::F32) {
+            return None;
+        }
+        let nodes = inputs.map(|t| t.node());
+        let x_host = contiguous(xa.primitive());
+        let saved = Saved {
+            weight: Arc::new(values(weight.primitive())),
+            bias: Arc::new(values(bias.primitive())),
+            gamma: Arc::new(values(gamma.primitive())),
+            beta: Arc::new(values(beta.primitive())),
+            conv,
+            norm,
+            z: Arc::new(Vec::new()),
+            stats: Arc::new(NormStats {
+                mean: Vec::new(),
+                rstd: Vec::new(),
+                row_sum: Vec::new(),
+            }),
+            x: x_host,
+        };
+        let (y, z, stats) = forward(&saved);
+        let y = flex_tensor(y, [batch, c_out, len]);
+        let out = match ConvNormSiluBackward
+            .prepare::<NoCheckpointing>(nodes)
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(prep) => prep.finish(
+                Saved {
+                    z: Arc::new(z),
+                    stats: Arc::new(stats),
+                    ..saved
+                },
+                y,
+            ),
+            OpsKind::UnTracked(prep) => prep.finish(y),
+        };
+        return Some(Tensor::from_primitive::<FlexAutodiff>(out));
+    }
+    let xf = x.clone().try_into_primitive::<Flex>().ok()?;
+    let prims = [
+        p.weight.clone().try_into_primitive::<Flex>().ok()?,
+        p.bias.clone().try_into_primitive::<Flex>().ok()?,
+        p.gamma.clone().try_into_primitive::<Flex>().ok()?,
+        p.beta.clone().try_into_primitive::<Flex>().ok()?,
+    ];
+    if xf.dtype() != DType::F32 || prims.iter().any(|t| t.dtype() != DType::F32) {
+        return None;
+    }
+    let [weight, bias, gamma, beta] = prims.map(|t| Arc::new(values(&t)));
+    let saved = Saved {
+        x: contiguous(&xf),
+        weight,
+        bias,
+        gamma,
+        beta,
+        conv,
+        norm,
+        z: Arc::new(Vec::new()),
+        stats: Arc::new(NormStats {
+            mean: Vec::new(),
+            rstd: Vec::new(),
+            row_sum: Vec::new(),
+        }),
+    };
+    let (y, _, _) = forward(&saved);
+    Some(Tensor::from_primitive::<Flex>(flex_tensor(
+        y,
+        [batch, c_out, len],
+    )))
+}
+
+/// The forward pass: output, convolution output `z` and the norm statistics.
+fn forward(s: &Saved) -> (Vec<f32>, Vec<f32>, NormStats) {
+    let x = s.x.as_slice::<f32>().expect("contiguous f32");
+    let z = kernels::conv_forward(x, &s.weight, s.conv);
+    let (y, stats) = kernels::norm_silu_forward(&z, &s.bias, &s.gamma, &s.beta, s.norm);
+    (y, z, stats)
+}
+
+/// What the backward pass keeps: the input, the convolution output, the parameters' values.
+#[derive(Debug, Clone)]
+struct Saved {
+    /// Contiguous `f32` input `[N, C_in, T]`.
+    x: FlexTensor,
+    weight: Arc<Vec<f32>>,
+    bias: Arc<Vec<f32>>,
+    gamma: Arc<Vec<f32>>,
+    beta: Arc<Vec<f32>>,
+    conv: ConvDims,
+    norm: NormDims,
+    /// Convolution output without bias, `[N, C_out, T]`.
+    z: Arc<Vec<f32>>,
+    stats: Arc<NormStats>,
+}
+
+#[derive(Debug)]
+struct ConvNormSiluBackward;
+
+impl Backward<Flex, 5> for ConvNormSiluBackward {
+    type State = Saved;
+
+    fn backward(self, ops: Ops<Saved, 5>, grads: &mut Gradients, _: &mut Checkpointer) {
+        let [node_x, node_weight, node_bias, node_gamma, node_beta] = ops.parents;
+        let gy = contiguous(&grads.consume::<Flex>(&ops.node));
+        let s = ops.state;
+        let g = kernels::norm_silu_backward(
+            gy.as_slice::<f32>().expect("contiguous f32"),
+            &s.z,
+            &s.bias,
+            &s.gamma,
+            &s.beta,
+            &s.stats,
+            s.norm,
+        );
+        let c_out = s.conv.c_out;
+        for (node, values) in [
+            (node_bias, g.dbias),
+            (node_gamma, g.dgamma),
+            (node_beta, g.dbeta),
+        ] {
+            if let Some(node) = node {
+                grads.register::<Flex>(node.id, flex_tensor(values, [c_out]));
+            }
+        }
+        let x = s.x.as_slice::<f32>().expect("contiguous f32");
+        let ConvDims {
+            batch,
+            c_in,
+            kernel,
+            len,
+            ..
+        } = s.conv;
+        if let Some(node) = node_weight {
+            let dw = kernels::conv_backward_weight(&g.dz, x, s.conv);
+            grads.register::<Flex>(node.id, flex_tensor(dw, [c_out, c_in, kernel]));
+        }
+        if let Some(node) = node_x {
+            let dx = kernels::conv_backward_input(&g.dz, &s.weight, s.conv);
+            grads.register::<Flex>(node.id, flex_tensor(dx, [batch, c_in, len]));
+        }
+    }
+}
+
+/// The tensor with a contiguous, zero-offset layout (a cheap clone when it already is).
+fn contiguous(t: &FlexTensor) -> FlexTensor {
+    if t.is_contiguous() && t.layout().start_offset() == 0 {
+        t.clone()
+    } else {
+        t.to_contiguous()
+    }
+}
+
+fn values(t: &FlexTensor) -> Vec<f32> {
+    contiguous(t)
+        .as_slice::<f32>()
+        .expect("contiguous f32")
+        .to_vec()
+}
+
+fn flex_tensor<const D: usize>(values: Vec<f32>, shape: [usize; D]) -> FlexTensor {
+    FlexTensor::from_data(TensorData::new(values, shape))
+}
