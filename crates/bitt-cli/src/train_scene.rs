@@ -492,9 +492,14 @@ fn print_summary(out: &Path, s: &bitt::run::RunSummary, real: Option<&RealScores
     if let Some(t) = s.synthetic.as_ref().and_then(|g| g.texture.as_ref()) {
         let f = |v: Option<f64>| v.map_or("n/a".to_string(), |v| format!("{v:.4}"));
         println!(
-            "texture L1 on texels invisible in the input: fine {} vs coarse {}",
+            "texture L1 on texels invisible in the input: fine {} vs coarse {} \
+             (visible on the other hand: fine {} vs coarse {}; invisible on both: fine {} vs coarse {})",
             f(t.fine_invisible),
-            f(t.coarse_invisible)
+            f(t.coarse_invisible),
+            f(t.fine_symmetric),
+            f(t.coarse_symmetric),
+            f(t.fine_hidden_both),
+            f(t.coarse_hidden_both)
         );
     }
 }

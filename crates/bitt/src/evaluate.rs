@@ -153,6 +153,19 @@ pub struct TextureScore {
     pub coarse_visible: Option<f64>,
     /// Coarse texture, texels invisible in the input.
     pub coarse_invisible: Option<f64>,
+    /// Fine texture, texels invisible on their own hand but visible at the same texel of the
+    /// other hand (usable through the layout's left/right symmetry, paper Sec. 3.3).
+    #[serde(default)]
+    pub fine_symmetric: Option<f64>,
+    /// Coarse texture, the same texels.
+    #[serde(default)]
+    pub coarse_symmetric: Option<f64>,
+    /// Fine texture, texels invisible on both hands (only the prior and BTR fill them).
+    #[serde(default)]
+    pub fine_hidden_both: Option<f64>,
+    /// Coarse texture, the same texels.
+    #[serde(default)]
+    pub coarse_hidden_both: Option<f64>,
 }
 
 /// Means of several image metrics.
@@ -270,11 +283,58 @@ pub fn score_textures(avatar: &Avatar, gt: &[Vec<f32>; 2]) -> TextureScore {
         .map(|&v| v > 0.5)
         .collect();
     let invisible: Vec<bool> = visible.iter().map(|v| !v).collect();
+    // The same texel of the other hand: the second half for the first, and back.
+    let half = visible.len() / 2;
+    let other = |i: usize| visible[(i + half) % visible.len()];
+    let symmetric: Vec<bool> = (0..visible.len())
+        .map(|i| !visible[i] && other(i))
+        .collect();
+    let hidden_both: Vec<bool> = (0..visible.len())
+        .map(|i| !visible[i] && !other(i))
+        .collect();
     let (fine, coarse, gt) = (cat(&avatar.fine), cat(&avatar.coarse), cat(gt));
     TextureScore {
         fine_visible: texel_l1(&fine, &gt, &visible),
         fine_invisible: texel_l1(&fine, &gt, &invisible),
         coarse_visible: texel_l1(&coarse, &gt, &visible),
         coarse_invisible: texel_l1(&coarse, &gt, &invisible),
+        fine_symmetric: texel_l1(&fine, &gt, &symmetric),
+        coarse_symmetric: texel_l1(&coarse, &gt, &symmetric),
+        fine_hidden_both: texel_l1(&fine, &gt, &hidden_both),
+        coarse_hidden_both: texel_l1(&coarse, &gt, &hidden_both),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bitt_mesh::glam::DMat3;
+
+    /// Texel classes: visible, invisible, of which usable by symmetry or hidden on both.
+    #[test]
+    fn texture_scores_split_invisible_texels_by_the_other_hand() {
+        // 3 texels per hand; left sees texel 0, right sees texels 0 and 1.
+        let texture = |v: [f32; 3]| [v, v, v].concat();
+        let avatar = Avatar {
+            fine: [texture([0.1, 0.2, 0.3]), texture([0.0, 0.0, 0.5])],
+            coarse: [texture([0.0; 3]), texture([0.0; 3])],
+            albedo_uv: [texture([0.0; 3]), texture([0.0; 3])],
+            visible: [vec![1.0, 0.0, 0.0], vec![1.0, 1.0, 0.0]],
+            light: LightValues::default(),
+            camera: PinholeCamera::new(DMat3::IDENTITY, DMat3::IDENTITY, DVec3::Z, 4, 4)
+                .expect("camera"),
+        };
+        let gt = [texture([0.0; 3]), texture([0.0; 3])];
+        let s = score_textures(&avatar, &gt);
+        let near = |a: Option<f64>, b: f64| assert!((a.expect("value") - b).abs() < 1e-6);
+        // Visible: left 0 (0.1), right 0 and 1 (0.0, 0.0).
+        near(s.fine_visible, 0.1 / 3.0);
+        // Invisible: left 1, 2 (0.2, 0.3), right 2 (0.5).
+        near(s.fine_invisible, 1.0 / 3.0);
+        // Symmetric: left 1 (right sees it).
+        near(s.fine_symmetric, 0.2);
+        // Hidden on both: left 2 and right 2.
+        near(s.fine_hidden_both, 0.4);
+        near(s.coarse_hidden_both, 0.0);
     }
 }

@@ -549,8 +549,9 @@ fn write_report(
         let f = |v: Option<f64>| v.map_or("n/a".into(), |v| format!("{v:.4}"));
         if let Some(t) = &s.texture {
             html.push_str(&format!(
-            "<p>Texture L1 against the ground-truth albedo: texels visible in the input: fine {} / coarse {}; invisible: fine {} / coarse {}.</p>",
-            f(t.fine_visible), f(t.coarse_visible), f(t.fine_invisible), f(t.coarse_invisible)
+            "<p>Texture L1 against the ground-truth albedo: texels visible in the input: fine {} / coarse {}; invisible: fine {} / coarse {} (of those, visible on the other hand: fine {} / coarse {}; invisible on both hands: fine {} / coarse {}).</p>",
+            f(t.fine_visible), f(t.coarse_visible), f(t.fine_invisible), f(t.coarse_invisible),
+            f(t.fine_symmetric), f(t.coarse_symmetric), f(t.fine_hidden_both), f(t.coarse_hidden_both)
         ));
         }
     }
