@@ -524,7 +524,8 @@ pub(crate) fn norm_silu_forward(
     (y, stats)
 }
 
-/// Gradients of [`norm_silu_forward`].
+/// Gradients of [`norm_silu_forward`] (the tests' allocating form).
+#[cfg(test)]
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct NormSiluGrads {
     /// With respect to `z` (and so to the convolution's output), `[batch, channels, len]`.
@@ -534,12 +535,8 @@ pub(crate) struct NormSiluGrads {
     pub dbeta: Vec<f32>,
 }
 
-/// The backward pass of [`norm_silu_forward`], given the output gradient `gy`.
-///
-/// With `a = xhat gamma + beta`, `ga = gy silu'(a)`, per group `m1 = mean(gamma ga)`,
-/// `m2 = mean(gamma ga xhat)`: `dz = rstd (gamma ga - m1 - xhat m2)`, `dgamma = sum ga xhat`,
-/// `dbeta = sum ga`, `dbias = sum dz`. Per row this is two passes: `ga` with the sums
-/// `sum ga`, `sum ga z`, then `dz` as an affine map of `(ga, z)` in place.
+/// [`norm_silu_backward_in_place`] into a new buffer (tests).
+#[cfg(test)]
 pub(crate) fn norm_silu_backward(
     gy: &[f32],
     z: &[f32],
@@ -549,30 +546,54 @@ pub(crate) fn norm_silu_backward(
     stats: &NormStats,
     d: NormDims,
 ) -> NormSiluGrads {
+    let mut dz = gy.to_vec();
+    let [dbias, dgamma, dbeta] =
+        norm_silu_backward_in_place(&mut dz, z, bias, gamma, beta, stats, d);
+    NormSiluGrads {
+        dz,
+        dbias,
+        dgamma,
+        dbeta,
+    }
+}
+
+/// The backward pass of [`norm_silu_forward`], in place: `grad` holds the output gradient
+/// `gy` on entry and `dz` on return (no new `[batch, channels, len]` buffer); returns
+/// `[dbias, dgamma, dbeta]`.
+///
+/// With `a = xhat gamma + beta`, `ga = gy silu'(a)`, per group `m1 = mean(gamma ga)`,
+/// `m2 = mean(gamma ga xhat)`: `dz = rstd (gamma ga - m1 - xhat m2)`, `dgamma = sum ga xhat`,
+/// `dbeta = sum ga`, `dbias = sum dz`. Per row this is two passes: `ga` with the sums
+/// `sum ga`, `sum ga z`, then `dz` as an affine map of `(ga, z)`.
+pub(crate) fn norm_silu_backward_in_place(
+    grad: &mut [f32],
+    z: &[f32],
+    bias: &[f32],
+    gamma: &[f32],
+    beta: &[f32],
+    stats: &NormStats,
+    d: NormDims,
+) -> [Vec<f32>; 3] {
     let rows = d.batch * d.channels;
-    assert_eq!(gy.len(), rows * d.len, "norm_silu_backward: gy");
+    assert_eq!(grad.len(), rows * d.len, "norm_silu_backward: gy");
     assert_eq!(z.len(), rows * d.len, "norm_silu_backward: z");
     let arch = Arch::new();
     let maps = row_maps(bias, gamma, beta, stats, d);
-    let mut dz = vec![0.0f32; rows * d.len];
-    // Pass 1: ga into dz; per row (sum ga, sum ga z).
+    let dz = grad;
+    // Pass 1: ga over gy; per row (sum ga, sum ga z).
     let sums_ga: Vec<(f64, f64)> = dz
         .par_chunks_exact_mut(d.len)
-        .zip(gy.par_chunks_exact(d.len).zip(z.par_chunks_exact(d.len)))
+        .zip(z.par_chunks_exact(d.len))
         .enumerate()
-        .map(|(row, (out, (g, zr)))| {
+        .map(|(row, (out, zr))| {
             let (s, h) = (maps.scale[row], maps.shift[row]);
             arch.dispatch(|| {
                 let mut total = (0.0f64, 0.0f64);
-                for ((o, g), zb) in out
-                    .chunks_mut(BLOCK)
-                    .zip(g.chunks(BLOCK))
-                    .zip(zr.chunks(BLOCK))
-                {
-                    for ((o, &g), &z) in o.iter_mut().zip(g).zip(zb) {
+                for (o, zb) in out.chunks_mut(BLOCK).zip(zr.chunks(BLOCK)) {
+                    for (o, &z) in o.iter_mut().zip(zb) {
                         let a = z * s + h;
                         let sg = sigmoid(a);
-                        *o = g * sg * (1.0 + a * (1.0 - sg));
+                        *o *= sg * (1.0 + a * (1.0 - sg));
                     }
                     let (s1, s2) = sums(o, zb);
                     total.0 += f64::from(s1);
@@ -623,21 +644,19 @@ pub(crate) fn norm_silu_backward(
                 }
             });
         });
-    let mut grads = NormSiluGrads {
-        dz,
-        dbias: vec![0.0; d.channels],
-        dgamma: vec![0.0; d.channels],
-        dbeta: vec![0.0; d.channels],
-    };
+    let (mut dbias, mut dgamma, mut dbeta) = (
+        vec![0.0f32; d.channels],
+        vec![0.0f32; d.channels],
+        vec![0.0f32; d.channels],
+    );
     for row in 0..rows {
         let c = row % d.channels;
         let (p, q, r) = coef[row];
-        let dbias = p * a_sum[row] + q * stats.row_sum[row] + r * d.len as f64;
-        grads.dbias[c] += dbias as f32;
-        grads.dgamma[c] += b_sum[row] as f32;
-        grads.dbeta[c] += a_sum[row] as f32;
+        dbias[c] += (p * a_sum[row] + q * stats.row_sum[row] + r * d.len as f64) as f32;
+        dgamma[c] += b_sum[row] as f32;
+        dbeta[c] += a_sum[row] as f32;
     }
-    grads
+    [dbias, dgamma, dbeta]
 }
 
 #[cfg(test)]

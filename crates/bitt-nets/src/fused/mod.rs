@@ -190,23 +190,24 @@ impl Backward<Flex, 5> for ConvNormSiluBackward {
 
     fn backward(self, ops: Ops<Saved, 5>, grads: &mut Gradients, _: &mut Checkpointer) {
         let [node_x, node_weight, node_bias, node_gamma, node_beta] = ops.parents;
-        let gy = contiguous(&grads.consume::<Flex>(&ops.node));
         let s = ops.state;
-        let g = kernels::norm_silu_backward(
-            gy.as_slice::<f32>().expect("contiguous f32"),
-            &s.z,
-            &s.bias,
-            &s.gamma,
-            &s.beta,
-            &s.stats,
-            s.norm,
+        let mut gy = contiguous(&grads.consume::<Flex>(&ops.node));
+        let n = s.conv.batch * s.conv.c_out * s.conv.len;
+        // dz overwrites the output gradient when nothing else holds it (saves a buffer).
+        let unique = gy.try_storage_mut::<f32>().is_some_and(|b| b.len() == n);
+        let mut copy: Vec<f32>;
+        let dz: &mut [f32] = if unique {
+            gy.try_storage_mut::<f32>().expect("unique gradient")
+        } else {
+            copy = gy.as_slice::<f32>().expect("contiguous f32").to_vec();
+            &mut copy
+        };
+        let [dbias, dgamma, dbeta] = kernels::norm_silu_backward_in_place(
+            dz, &s.z, &s.bias, &s.gamma, &s.beta, &s.stats, s.norm,
         );
+        let dz: &[f32] = dz;
         let c_out = s.conv.c_out;
-        for (node, values) in [
-            (node_bias, g.dbias),
-            (node_gamma, g.dgamma),
-            (node_beta, g.dbeta),
-        ] {
+        for (node, values) in [(node_bias, dbias), (node_gamma, dgamma), (node_beta, dbeta)] {
             if let Some(node) = node {
                 grads.register::<Flex>(node.id, flex_tensor(values, [c_out]));
             }
@@ -220,11 +221,11 @@ impl Backward<Flex, 5> for ConvNormSiluBackward {
             ..
         } = s.conv;
         if let Some(node) = node_weight {
-            let dw = kernels::conv_backward_weight(&g.dz, x, s.conv);
+            let dw = kernels::conv_backward_weight(dz, x, s.conv);
             grads.register::<Flex>(node.id, flex_tensor(dw, [c_out, c_in, kernel]));
         }
         if let Some(node) = node_x {
-            let dx = kernels::conv_backward_input(&g.dz, &s.weight, s.conv);
+            let dx = kernels::conv_backward_input(dz, &s.weight, s.conv);
             grads.register::<Flex>(node.id, flex_tensor(dx, [batch, c_in, len]));
         }
     }
