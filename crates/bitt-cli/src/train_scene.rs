@@ -9,6 +9,9 @@ use std::time::Instant;
 
 use std::sync::OnceLock;
 
+/// Where a run goes without `--out`.
+const DEFAULT_OUT: &str = "runs/train-scene";
+
 use anyhow::{Context, Result, bail};
 use bitt::checkpoint::Checkpoint;
 use bitt::real::{
@@ -86,7 +89,7 @@ pub struct TrainSceneArgs {
     #[arg(long)]
     pub iterations: Option<usize>,
     /// Output folder of the run.
-    #[arg(long, default_value = "runs/train-scene")]
+    #[arg(long, default_value = DEFAULT_OUT)]
     pub out: PathBuf,
     /// Continue the run in this folder exactly where its last checkpoint left it (its
     /// `config.json` and scene, or for real data its `input.json` and `input/` images, are
@@ -366,6 +369,33 @@ pub(crate) fn sources(
     (hands, prior)
 }
 
+/// The folder of a new run. `--out` given explicitly must not hold a run (resume it
+/// instead); the default folder moves on to `runs/train-scene-2`, `-3`, ... so rerunning the
+/// demo never touches an earlier run.
+fn fresh_out(out: &Path, default: &Path) -> Result<PathBuf> {
+    let holds_run = |dir: &Path| dir.join(files::CHECKPOINT).exists();
+    if !holds_run(out) {
+        return Ok(out.to_path_buf());
+    }
+    if out != default {
+        bail!(
+            "{} already holds a run; use --resume {} to continue it or choose another --out",
+            out.display(),
+            out.display()
+        );
+    }
+    let next = (2..)
+        .map(|n| PathBuf::from(format!("{}-{n}", default.display())))
+        .find(|dir| !holds_run(dir))
+        .expect("an unused folder name");
+    println!(
+        "{} holds an earlier run; this one goes to {}",
+        default.display(),
+        next.display()
+    );
+    Ok(next)
+}
+
 /// `bitt train-scene`.
 pub fn run(args: &TrainSceneArgs) -> Result<()> {
     let started = Instant::now();
@@ -376,13 +406,7 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
             (dir.clone(), trainer, input)
         }
         None => {
-            if args.out.join(files::CHECKPOINT).exists() {
-                bail!(
-                    "{} already holds a run; use --resume {} to continue it or choose another --out",
-                    args.out.display(),
-                    args.out.display()
-                );
-            }
+            let out = fresh_out(&args.out, Path::new(DEFAULT_OUT))?;
             let mut config = training_config(args.config.as_deref(), args.preset)?;
             if let Some(n) = args.iterations {
                 config.iterations = n;
@@ -394,17 +418,16 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
             // Every input is read and checked (and the trainer built) before the run folder
             // is created, so a bad input leaves nothing behind.
             let (trainer, input) = fresh(args, config, &device)?;
-            std::fs::create_dir_all(&args.out)
-                .with_context(|| format!("creating {}", args.out.display()))?;
+            std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
             bitt_mesh::export::write_atomically(
-                &args.out.join(files::CONFIG),
+                &out.join(files::CONFIG),
                 serde_json::to_string_pretty(&trainer.config)?.as_bytes(),
             )?;
             match &input {
-                Input::Synthetic(scene) => scene.write(&args.out.join(files::SCENE))?,
-                Input::Real(record, scene) => record.write(&args.out, scene)?,
+                Input::Synthetic(scene) => scene.write(&out.join(files::SCENE))?,
+                Input::Real(record, scene) => record.write(&out, scene)?,
             }
-            (args.out.clone(), trainer, input)
+            (out, trainer, input)
         }
     };
     let config = trainer.config.clone();
@@ -534,6 +557,33 @@ mod tests {
 
     /// `--config FILE` replaces the preset (the run's `config.json` is that file's content);
     /// it conflicts with `--preset`, and a broken file is named and leaves nothing behind.
+    /// Rerunning with the default folder moves on to a numbered one; an explicit folder that
+    /// holds a run is refused.
+    #[test]
+    fn new_runs_never_overwrite_earlier_ones() {
+        let dir = scratch("cli-fresh-out");
+        let default = dir.join("runs/train-scene");
+        let finished = |d: &Path| {
+            std::fs::create_dir_all(d).unwrap();
+            std::fs::write(d.join(files::CHECKPOINT), b"x").unwrap();
+        };
+        assert_eq!(fresh_out(&default, &default).unwrap(), default);
+        finished(&default);
+        let second = fresh_out(&default, &default).unwrap();
+        assert_eq!(second, dir.join("runs/train-scene-2"));
+        finished(&second);
+        assert_eq!(
+            fresh_out(&default, &default).unwrap(),
+            dir.join("runs/train-scene-3")
+        );
+        let err = fresh_out(&second, &default).unwrap_err().to_string();
+        assert!(err.contains("already holds a run"), "{err}");
+        assert_eq!(
+            fresh_out(&dir.join("other"), &default).unwrap(),
+            dir.join("other")
+        );
+    }
+
     #[test]
     fn config_file_replaces_the_preset() {
         let dir = scratch("cli-config");
