@@ -316,13 +316,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         )?;
     }
     eprintln!();
-    merge(std::slice::from_ref(&args.out))?;
-    println!(
-        "evaluation done in {:.1} min; results in {}/results.md",
-        started.elapsed().as_secs_f64() / 60.0,
-        args.out.display()
-    );
-    Ok(())
+    finish(&args.out, started)
 }
 
 /// `sheets/{name}.png`: the input, the ground truth and each method at the first novel view
@@ -493,11 +487,16 @@ fn run_interhand(
     if taken == 0 {
         bail!("no capture under {} has a usable scene", root.display());
     }
-    merge(std::slice::from_ref(&args.out))?;
+    finish(&args.out, started)
+}
+
+/// Merges the scene results in `out` into its tables and says where they are.
+fn finish(out: &Path, started: Instant) -> Result<()> {
+    merge(&[out.to_path_buf()])?;
     println!(
         "evaluation done in {:.1} min; results in {}/results.md",
         started.elapsed().as_secs_f64() / 60.0,
-        args.out.display()
+        out.display()
     );
     Ok(())
 }

@@ -198,22 +198,23 @@ struct Truth {
 }
 
 impl Truth {
-    /// From prepared views: each view's ground-truth hand image and hands.
-    fn from_views(
+    /// From the input view, the novel views and poses, and `truth`, which gives a view's
+    /// ground-truth hand image and hands.
+    fn from_views<V>(
         trainer: &Trainer,
-        input: (Vec<f32>, TwoHandScene),
-        views: Vec<(Vec<f32>, TwoHandScene)>,
-        poses: Vec<(Vec<f32>, TwoHandScene)>,
+        (input, views, poses): (&V, &[V], &[V]),
+        truth: impl Fn(&V) -> Result<(Vec<f32>, TwoHandScene), BittError>,
         device: &Device,
     ) -> Result<Self, BittError> {
-        let prep = |(gt, hands): (Vec<f32>, TwoHandScene)| {
+        let prep = |v: &V| {
+            let (gt, hands) = truth(v)?;
             let geometry = ViewGeometry::new(&trainer.assets, &hands, device)?;
             Ok::<_, BittError>((gt, geometry, hands))
         };
         Ok(Truth {
             input: prep(input)?,
-            views: views.into_iter().map(prep).collect::<Result<_, _>>()?,
-            poses: poses.into_iter().map(prep).collect::<Result<_, _>>()?,
+            views: views.iter().map(prep).collect::<Result<_, _>>()?,
+            poses: poses.iter().map(prep).collect::<Result<_, _>>()?,
         })
     }
 
@@ -221,23 +222,14 @@ impl Truth {
     /// reference's `masked_img`).
     fn real(trainer: &Trainer, scene: &RealScene, device: &Device) -> Result<Self, BittError> {
         let size = trainer.config.nets.image_size;
-        let prep = |v: &RealView| -> Result<(Vec<f32>, TwoHandScene), BittError> {
-            let masks = hand_masks(trainer, &v.hands)?;
-            Ok((hand_image(&v.image, &masks, size * size)?, v.hands.clone()))
-        };
+        let views = (&scene.train, &scene.novel_views[..], &scene.novel_poses[..]);
         Self::from_views(
             trainer,
-            prep(&scene.train)?,
-            scene
-                .novel_views
-                .iter()
-                .map(prep)
-                .collect::<Result<_, _>>()?,
-            scene
-                .novel_poses
-                .iter()
-                .map(prep)
-                .collect::<Result<_, _>>()?,
+            views,
+            |v: &RealView| {
+                let masks = hand_masks(trainer, &v.hands)?;
+                Ok((hand_image(&v.image, &masks, size * size)?, v.hands.clone()))
+            },
             device,
         )
     }
@@ -253,23 +245,14 @@ impl Truth {
     /// A synthetic scene: each view's image times its true hand masks.
     fn new(trainer: &Trainer, scene: &SynthScene, device: &Device) -> Result<Self, BittError> {
         let size = trainer.config.nets.image_size;
-        let prep = |v: &SynthView| -> Result<(Vec<f32>, TwoHandScene), BittError> {
-            let (image, masks, hands) = fit_synthetic_view(v, size)?;
-            Ok((hand_image(&image, &masks, size * size)?, hands))
-        };
+        let views = (&scene.train, &scene.novel_views[..], &scene.novel_poses[..]);
         Self::from_views(
             trainer,
-            prep(&scene.train)?,
-            scene
-                .novel_views
-                .iter()
-                .map(prep)
-                .collect::<Result<_, _>>()?,
-            scene
-                .novel_poses
-                .iter()
-                .map(prep)
-                .collect::<Result<_, _>>()?,
+            views,
+            |v: &SynthView| {
+                let (image, masks, hands) = fit_synthetic_view(v, size)?;
+                Ok((hand_image(&image, &masks, size * size)?, hands))
+            },
             device,
         )
     }

@@ -30,14 +30,6 @@ impl ConvDims {
             .map(move |j| (j, j as isize - pad as isize))
     }
 
-    /// Output columns `[lo, hi)` whose input `t + offset` lies inside the signal.
-    fn valid(&self, offset: isize) -> (usize, usize) {
-        let len = self.len as isize;
-        let lo = (-offset).clamp(0, len) as usize;
-        let hi = (len - offset).clamp(0, len) as usize;
-        (lo, hi.max(lo))
-    }
-
     /// Tap `j` of `weight [c_out, c_in, kernel]` as a `[c_out, c_in]` matrix.
     fn tap<'a>(&self, weight: &'a [f32], j: usize) -> MatRef<'a> {
         MatRef {
@@ -61,6 +53,14 @@ impl ConvDims {
     }
 }
 
+/// Output columns `[lo, hi)` of a length-`len` signal whose input `t + offset` lies inside
+/// it.
+fn valid_columns(len: usize, offset: isize) -> (usize, usize) {
+    let l = len as isize;
+    let lo = (-offset).clamp(0, l) as usize;
+    (lo, ((l - offset).clamp(0, l) as usize).max(lo))
+}
+
 /// Columns `[from, from + cols)` of a row-major `[rows, len]` block.
 fn columns(data: &[f32], rows: usize, len: usize, from: usize, cols: usize) -> MatRef<'_> {
     MatRef {
@@ -82,23 +82,34 @@ fn columns_mut(data: &mut [f32], rows: usize, len: usize, from: usize, cols: usi
     }
 }
 
-/// Runs `f(sample input, sample output, parallel)` for every sample: on rayon's threads with
-/// single-threaded GEMMs when there are at least as many samples as threads (BTR's two
-/// hands on two cores), else one sample at a time with multi-threaded GEMMs.
-fn by_sample<'a, F>(
-    inputs: std::slice::ChunksExact<'a, f32>,
-    outputs: std::slice::ChunksExactMut<'a, f32>,
+/// [`shifted_products`] for every sample of a batch: `src` is `[batch, rows_in, len]`, the
+/// result `[batch, rows_out, len]`. The samples run on rayon's threads with single-threaded
+/// GEMMs when there are at least as many as threads (BTR's two hands on two cores), else
+/// one at a time with multi-threaded GEMMs.
+fn batched_products(
+    src: &[f32],
     batch: usize,
-    f: F,
-) where
-    F: Fn((&'a [f32], &'a mut [f32]), bool) + Sync,
-{
-    if batch >= rayon::current_num_threads() {
-        let pairs: Vec<_> = inputs.zip(outputs).collect();
-        pairs.into_par_iter().for_each(|pair| f(pair, false));
-    } else {
-        inputs.zip(outputs).for_each(|pair| f(pair, true));
+    rows_out: usize,
+    len: usize,
+    taps: &[(MatRef<'_>, isize)],
+) -> Vec<f32> {
+    let mut dst = vec![0.0f32; batch * rows_out * len];
+    if dst.is_empty() {
+        return dst;
     }
+    let rows_in = src.len() / (batch * len);
+    let pairs = src
+        .chunks_exact(rows_in * len)
+        .zip(dst.chunks_exact_mut(rows_out * len));
+    if batch >= rayon::current_num_threads() {
+        let pairs: Vec<_> = pairs.collect();
+        pairs
+            .into_par_iter()
+            .for_each(|(s, d)| shifted_products(d, s, len, taps, false));
+    } else {
+        pairs.for_each(|(s, d)| shifted_products(d, s, len, taps, true));
+    }
+    dst
 }
 
 /// Input channels up to which [`shifted_products`] stacks the shifted inputs into one GEMM
@@ -138,13 +149,8 @@ fn per_tap_products(
     taps: &[(MatRef<'_>, isize)],
     parallel: bool,
 ) {
-    let valid = |offset: isize| {
-        let l = len as isize;
-        let lo = (-offset).clamp(0, l) as usize;
-        (lo, ((l - offset).clamp(0, l) as usize).max(lo))
-    };
     for (n, &(a, offset)) in taps.iter().enumerate() {
-        let (lo, hi) = valid(offset);
+        let (lo, hi) = valid_columns(len, offset);
         if hi > lo {
             let from = (lo as isize + offset) as usize;
             matmul(
@@ -229,24 +235,11 @@ fn stacked_products(
 pub(crate) fn conv_forward(x: &[f32], weight: &[f32], d: ConvDims) -> Vec<f32> {
     assert_eq!(x.len(), d.batch * d.c_in * d.len, "conv_forward: x");
     assert_eq!(weight.len(), d.c_out * d.c_in * d.kernel, "conv_forward: w");
-    let mut z = vec![0.0f32; d.batch * d.c_out * d.len];
-    if z.is_empty() {
-        return z;
-    }
     let taps: Vec<(MatRef<'_>, isize)> = d
         .taps()
         .map(|(j, offset)| (d.tap(weight, j), offset))
         .collect();
-    let per_sample = |(xb, zb): (&[f32], &mut [f32]), parallel: bool| {
-        shifted_products(zb, xb, d.len, &taps, parallel);
-    };
-    by_sample(
-        x.chunks_exact(d.c_in * d.len),
-        z.chunks_exact_mut(d.c_out * d.len),
-        d.batch,
-        per_sample,
-    );
-    z
+    batched_products(x, d.batch, d.c_out, d.len, &taps)
 }
 
 /// Gradient of [`conv_forward`] with respect to `x`.
@@ -260,25 +253,12 @@ pub(crate) fn conv_backward_input(dz: &[f32], weight: &[f32], d: ConvDims) -> Ve
         d.batch * d.c_out * d.len,
         "conv_backward_input: dz"
     );
-    let mut dx = vec![0.0f32; d.batch * d.c_in * d.len];
-    if dx.is_empty() {
-        return dx;
-    }
     // dx[:, s] += W_j^T dz[:, s - offset_j].
     let taps: Vec<(MatRef<'_>, isize)> = d
         .taps()
         .map(|(j, offset)| (d.tap_t(weight, j), -offset))
         .collect();
-    let per_sample = |(gb, xb): (&[f32], &mut [f32]), parallel: bool| {
-        shifted_products(xb, gb, d.len, &taps, parallel);
-    };
-    by_sample(
-        dz.chunks_exact(d.c_out * d.len),
-        dx.chunks_exact_mut(d.c_in * d.len),
-        d.batch,
-        per_sample,
-    );
-    dx
+    batched_products(dz, d.batch, d.c_in, d.len, &taps)
 }
 
 /// Gradient of [`conv_forward`] with respect to the weight. The texel axis (the long
@@ -307,7 +287,7 @@ pub(crate) fn conv_backward_weight(dz: &[f32], x: &[f32], d: ConvDims) -> Vec<f3
             .zip(x.chunks_exact(d.c_in * d.len))
         {
             for (j, offset) in d.taps() {
-                let (lo, hi) = d.valid(offset);
+                let (lo, hi) = valid_columns(d.len, offset);
                 let (lo, hi) = (lo.max(start), hi.min(end));
                 if hi <= lo {
                     continue;

@@ -80,90 +80,74 @@ pub(crate) fn conv_norm_silu(x: &Tensor<3>, p: &BlockParams) -> Option<Tensor<3>
         groups: p.groups,
         epsilon: p.epsilon,
     };
+    let f32s = |ts: &[&FlexTensor]| ts.iter().all(|t| t.dtype() == DType::F32);
     if let Ok(xa) = x.clone().try_into_primitive::<FlexAutodiff>() {
-        let weight = p.weight.clone().try_into_primitive::<FlexAutodiff>().ok()?;
-        let bias = p.bias.clone().try_into_primitive::<FlexAutodiff>().ok()?;
-        let gamma = p.gamma.clone().try_into_primitive::<FlexAutodiff>().ok()?;
-        let beta = p.beta.clone().try_into_primitive::<FlexAutodiff>().ok()?;
+        let [weight, bias, gamma, beta] = [
+            p.weight.clone().try_into_primitive::<FlexAutodiff>().ok()?,
+            p.bias.clone().try_into_primitive::<FlexAutodiff>().ok()?,
+            p.gamma.clone().try_into_primitive::<FlexAutodiff>().ok()?,
+            p.beta.clone().try_into_primitive::<FlexAutodiff>().ok()?,
+        ];
         let inputs = [&xa, &weight, &bias, &gamma, &beta];
-        if inputs.iter().any(|t| t.primitive().dtype() != DType::F32) {
+        if !f32s(&inputs.map(|t| t.primitive())) {
             return None;
         }
         let nodes = inputs.map(|t| t.node());
-        let x_host = contiguous(xa.primitive());
-        let saved = Saved {
-            weight: Arc::new(values(weight.primitive())),
-            bias: Arc::new(values(bias.primitive())),
-            gamma: Arc::new(values(gamma.primitive())),
-            beta: Arc::new(values(beta.primitive())),
+        let (y, saved) = forward(
+            xa.primitive(),
+            [&weight, &bias, &gamma, &beta].map(|t| t.primitive()),
             conv,
             norm,
-            z: Arc::new(Vec::new()),
-            stats: Arc::new(NormStats {
-                mean: Vec::new(),
-                rstd: Vec::new(),
-                row_sum: Vec::new(),
-            }),
-            x: x_host,
-        };
-        let (y, z, stats) = forward(&saved);
-        let y = flex_tensor(y, [batch, c_out, len]);
+        );
         let out = match ConvNormSiluBackward
             .prepare::<NoCheckpointing>(nodes)
             .compute_bound()
             .stateful()
         {
-            OpsKind::Tracked(prep) => prep.finish(
-                Saved {
-                    z: Arc::new(z),
-                    stats: Arc::new(stats),
-                    ..saved
-                },
-                y,
-            ),
+            OpsKind::Tracked(prep) => prep.finish(saved, y),
             OpsKind::UnTracked(prep) => prep.finish(y),
         };
         return Some(Tensor::from_primitive::<FlexAutodiff>(out));
     }
     let xf = x.clone().try_into_primitive::<Flex>().ok()?;
-    let prims = [
+    let [weight, bias, gamma, beta] = [
         p.weight.clone().try_into_primitive::<Flex>().ok()?,
         p.bias.clone().try_into_primitive::<Flex>().ok()?,
         p.gamma.clone().try_into_primitive::<Flex>().ok()?,
         p.beta.clone().try_into_primitive::<Flex>().ok()?,
     ];
-    if xf.dtype() != DType::F32 || prims.iter().any(|t| t.dtype() != DType::F32) {
+    if !f32s(&[&xf, &weight, &bias, &gamma, &beta]) {
         return None;
     }
-    let [weight, bias, gamma, beta] = prims.map(|t| Arc::new(values(&t)));
+    let (y, _) = forward(&xf, [&weight, &bias, &gamma, &beta], conv, norm);
+    Some(Tensor::from_primitive::<Flex>(y))
+}
+
+/// The forward pass on flex tensors (all `f32`): the output `[N, C_out, T]` and what the
+/// backward pass needs.
+fn forward(
+    x: &FlexTensor,
+    [weight, bias, gamma, beta]: [&FlexTensor; 4],
+    conv: ConvDims,
+    norm: NormDims,
+) -> (FlexTensor, Saved) {
+    let x = contiguous(x);
+    let [weight, bias, gamma, beta] = [weight, bias, gamma, beta].map(|t| Arc::new(values(t)));
+    let z = kernels::conv_forward(x.as_slice::<f32>().expect("contiguous f32"), &weight, conv);
+    let (y, stats) = kernels::norm_silu_forward(&z, &bias, &gamma, &beta, norm);
+    let y = flex_tensor(y, [conv.batch, conv.c_out, conv.len]);
     let saved = Saved {
-        x: contiguous(&xf),
+        x,
         weight,
         bias,
         gamma,
         beta,
         conv,
         norm,
-        z: Arc::new(Vec::new()),
-        stats: Arc::new(NormStats {
-            mean: Vec::new(),
-            rstd: Vec::new(),
-            row_sum: Vec::new(),
-        }),
+        z: Arc::new(z),
+        stats: Arc::new(stats),
     };
-    let (y, _, _) = forward(&saved);
-    Some(Tensor::from_primitive::<Flex>(flex_tensor(
-        y,
-        [batch, c_out, len],
-    )))
-}
-
-/// The forward pass: output, convolution output `z` and the norm statistics.
-fn forward(s: &Saved) -> (Vec<f32>, Vec<f32>, NormStats) {
-    let x = s.x.as_slice::<f32>().expect("contiguous f32");
-    let z = kernels::conv_forward(x, &s.weight, s.conv);
-    let (y, stats) = kernels::norm_silu_forward(&z, &s.bias, &s.gamma, &s.beta, s.norm);
-    (y, z, stats)
+    (y, saved)
 }
 
 /// What the backward pass keeps: the input, the convolution output, the parameters' values.
