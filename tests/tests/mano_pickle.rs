@@ -499,3 +499,65 @@ fn broken_mano_files_are_named_errors() {
     assert!(e.contains("/nonexistent/bitt"), "{e}");
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// The differentiable hand layer (`bitt::hand_layer`) poses a MANO pair exactly as the f64
+/// forward pass does (vertices and the 21 joints, to 1e-5), with the pose given as PCA
+/// coefficients through the layer's own PCA expansion, on flex and ndarray.
+#[test]
+fn hand_layer_matches_the_f64_forward_pass_on_mano() {
+    use bitt::hand_layer::{HandLayer, HandLayerParams, has_learned_pose_pca};
+    use burn::tensor::{Device, Tensor, TensorData};
+    let dir = scratch("layer");
+    std::fs::write(dir.join("MANO_RIGHT.pkl"), mano_pickle(&raw_mano(4))).unwrap();
+    std::fs::write(dir.join("MANO_LEFT.pkl"), mano_pickle(&raw_mano(5))).unwrap();
+    let pair = load_model_dir(&dir).unwrap();
+    assert!(has_learned_pose_pca(&pair.left) && has_learned_pose_pca(&pair.right));
+    let hands: Vec<HandParams> = (0..2)
+        .map(|h| {
+            let (root, pca, betas, trans) = random_params(40 + h);
+            to_params(&root, &pca, &betas, trans)
+        })
+        .collect();
+    #[allow(deprecated)]
+    let devices = [Device::flex(), Device::ndarray()];
+    for device in devices {
+        let layer = HandLayer::new(&pair, &device).unwrap();
+        let mut params = HandLayerParams::from_host(&pair, [&hands[0], &hands[1]], &device);
+        // The same pose again, from the coefficients through the layer's PCA expansion.
+        let coeffs: Vec<f32> = hands
+            .iter()
+            .flat_map(|p| match &p.pose {
+                HandPose::Pca(c) => c.iter().map(|&x| x as f32).collect::<Vec<_>>(),
+                _ => unreachable!(),
+            })
+            .collect();
+        params.finger_pose =
+            layer.pca_to_axis_angles(Tensor::from_data(TensorData::new(coeffs, [2, 45]), &device));
+        let out = layer.forward(&params);
+        let read = |t: Tensor<3>| {
+            t.into_data()
+                .convert::<f32>()
+                .try_into_vec::<f32>()
+                .unwrap()
+        };
+        let (verts, joints) = (read(out.vertices), read(out.joints));
+        let mut worst = 0.0f64;
+        for (h, side) in Side::BOTH.iter().enumerate() {
+            let want = pair.get(*side).forward(&hands[h]).unwrap();
+            let got =
+                |flat: &[f32], n: usize, i: usize, c: usize| f64::from(flat[(h * n + i) * 3 + c]);
+            for (i, p) in want.vertices.iter().enumerate() {
+                for c in 0..3 {
+                    worst = worst.max((got(&verts, NV, i, c) - p[c]).abs());
+                }
+            }
+            for (i, p) in want.joints.iter().enumerate() {
+                for c in 0..3 {
+                    worst = worst.max((got(&joints, 21, i, c) - p[c]).abs());
+                }
+            }
+        }
+        assert!(worst < 1e-5, "largest difference {worst:e}");
+    }
+    std::fs::remove_dir_all(dir).unwrap();
+}

@@ -203,6 +203,7 @@ fn interhand_scene_trains_and_scores_its_novel_views() {
         &PriorSource::Procedural,
         tiny(2),
         None,
+        None,
         &device,
     )
     .unwrap();
@@ -250,7 +251,8 @@ fn annotation_run_trains_resumes_and_renders_in_other_poses() {
     let device = Device::flex().autodiff();
     let run = dir.join("run");
     let (hands, prior) = (HandSource::Procedural, PriorSource::Procedural);
-    let mut setup = annotation_setup(&img, &pkl, &hands, &prior, tiny(3), None, &device).unwrap();
+    let mut setup =
+        annotation_setup(&img, &pkl, &hands, &prior, tiny(3), None, None, &device).unwrap();
     assert_eq!(setup.trainer.view.image.dims(), [1, 3, 32, 32]);
     // Both hands are seen (32 x 32 pixels cover few of the 128² layout's texels).
     let [lv, rv] = setup.trainer.view.visible_fraction();
@@ -265,7 +267,7 @@ fn annotation_run_trains_resumes_and_renders_in_other_poses() {
     // Train 2 iterations, checkpoint, then resume from the folder for the third: the same
     // result as 3 straight iterations.
     let mut straight =
-        annotation_setup(&img, &pkl, &hands, &prior, tiny(3), None, &device).unwrap();
+        annotation_setup(&img, &pkl, &hands, &prior, tiny(3), None, None, &device).unwrap();
     straight.trainer.train(None, &mut Silent).unwrap();
     setup.trainer.config.iterations = 2;
     let ckpt = run.join("checkpoint.safetensors");
@@ -338,7 +340,7 @@ fn bad_annotation_inputs_are_named() {
     let device = Device::flex().autodiff();
     let (hands, prior) = (HandSource::Procedural, PriorSource::Procedural);
     let setup = |img: &Path, pkl: &Path| {
-        annotation_setup(img, pkl, &hands, &prior, tiny(1), None, &device).map(|_| ())
+        annotation_setup(img, pkl, &hands, &prior, tiny(1), None, None, &device).map(|_| ())
     };
     // Wrong image size.
     let small = dir.join("small.png");
@@ -385,6 +387,7 @@ fn bad_annotation_inputs_are_named() {
         },
         tiny(1),
         None,
+        None,
         &device,
     ));
     assert!(e.contains("MANO"), "{e}");
@@ -412,6 +415,7 @@ fn demo_frame_trains_with_procedural_hands_if_present() {
         &HandSource::Procedural,
         &PriorSource::Procedural,
         tiny(2),
+        None,
         None,
         &device,
     )
@@ -490,7 +494,8 @@ fn mano_and_html_folders_train_with_the_html_prior() {
         HandSource::Mano { dir: mano.clone() },
         PriorSource::Html { dir: html.clone() },
     );
-    let mut setup = annotation_setup(&img, &pkl, &hands, &prior, tiny(2), None, &device).unwrap();
+    let mut setup =
+        annotation_setup(&img, &pkl, &hands, &prior, tiny(2), None, None, &device).unwrap();
     assert_eq!(setup.trainer.config.nets.html.coefficients_per_hand, 12);
     assert_eq!(setup.trainer.config.texture.components, 12);
     setup.trainer.config.validate().unwrap();
@@ -520,6 +525,7 @@ fn mano_and_html_folders_train_with_the_html_prior() {
         &hands,
         &PriorSource::Procedural,
         tiny(1),
+        None,
         None,
         &device,
     ));

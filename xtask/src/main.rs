@@ -405,9 +405,8 @@ fn main() -> Result<()> {
     match cmd.as_str() {
         "demo" => bitt(&[&["demo".to_string()], rest].concat()),
         "pose-hands" | "convert-mano" | "texture" | "convert-html" | "render" | "train-scene"
-        | "render-avatar" | "synth" | "eval" | "eval-merge" | "metrics" | "convert-lpips" => {
-            bitt(&args)
-        }
+        | "render-avatar" | "synth" | "eval" | "eval-merge" | "metrics" | "convert-lpips"
+        | "refine-hands" => bitt(&args),
         "test" => {
             let status = cargo()
                 .args(["test", "--workspace", "--release"])

@@ -63,6 +63,10 @@ pub struct EvalArgs {
     /// s2hand-like (default: all).
     #[arg(long, value_delimiter = ',')]
     pub methods: Vec<String>,
+    /// Add the method "BiTT + refined mesh": BiTT trained after refining the given meshes
+    /// against the input image (`bitt refine-hands`; synthetic scenes).
+    #[arg(long)]
+    pub refine_mesh: bool,
     /// Mesh settings: both, gt-mesh or noisy-mesh.
     #[arg(long, default_value = "both")]
     pub mesh: String,
@@ -168,8 +172,11 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             .filter(|&n| n >= 1)
             .with_context(|| format!("--scenes {n}: expected a positive number or `all`"))?,
     };
-    let methods: Vec<Method> = if args.methods.is_empty() {
-        Method::ALL.to_vec()
+    let mut methods: Vec<Method> = if args.methods.is_empty() {
+        Method::ALL
+            .into_iter()
+            .filter(|m| *m != Method::BittRefined)
+            .collect()
     } else {
         args.methods
             .iter()
@@ -183,6 +190,9 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             })
             .collect::<Result<_>>()?
     };
+    if args.refine_mesh && !methods.contains(&Method::BittRefined) {
+        methods.push(Method::BittRefined);
+    }
     let settings: Vec<MeshSetting> = match args.mesh.as_str() {
         "both" => MeshSetting::ALL.to_vec(),
         "gt-mesh" => vec![MeshSetting::GtMesh],

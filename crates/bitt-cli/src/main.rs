@@ -11,6 +11,7 @@ mod eval;
 mod metrics;
 mod nets;
 mod pose_hands;
+mod refine_hands;
 mod render;
 mod render_avatar;
 mod synth;
@@ -81,6 +82,10 @@ enum Command {
     Eval(eval::EvalArgs),
     /// Combine the scene results of `bitt eval` shards into results.json and results.md.
     EvalMerge(eval::MergeArgs),
+    /// Refine both hands' pose, shape, root and translation against the photo through the
+    /// differentiable renderer (a synthetic scene's perturbed meshes, or a photo with its
+    /// annotation); writes hands.json, refine.json and overlay.png.
+    RefineHands(refine_hands::RefineHandsArgs),
     /// Render a trained run's avatar at another view (`--view AZ,EL`), pose or light.
     RenderAvatar(render_avatar::RenderAvatarArgs),
     /// Time the renderer's stages forward and backward (JSON; `cargo xtask bench render`).
@@ -115,6 +120,7 @@ fn main() -> Result<()> {
         Command::Synth(args) => synth::run(&args),
         Command::TrainScene(args) => train_scene::run(&args),
         Command::RenderAvatar(args) => render_avatar::run(&args),
+        Command::RefineHands(args) => refine_hands::run(&args),
         Command::Eval(args) => eval::run(&args),
         Command::EvalMerge(args) => eval::merge_cmd(&args),
         Command::BenchRender(args) => bench_render::run(&args),

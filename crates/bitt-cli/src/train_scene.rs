@@ -13,12 +13,14 @@ use std::sync::OnceLock;
 const DEFAULT_OUT: &str = "runs/train-scene";
 
 use anyhow::{Context, Result, bail};
+use bitt::assets::HandAssets;
 use bitt::checkpoint::Checkpoint;
 use bitt::real::{
     HandSource, PriorSource, RealInput, RealScene, RealScores, annotation_setup, interhand_setup,
     score_real,
 };
-use bitt::run::{files, synthetic_trainer, texture_prior, write_run};
+use bitt::refine::{MeshRefine, Refinement, pca_pose_notes, refine_synthetic};
+use bitt::run::{files, synthetic_trainer, texture_prior, write_run, write_training_refinement};
 use bitt::{Observer, Progress, TrainConfig, Trainer};
 use bitt_mesh::interhand::{
     InterHandDataset, InterHandSelection, PAPER_NOVEL_POSES, PAPER_NOVEL_VIEWS,
@@ -27,6 +29,7 @@ use bitt_nets::Preset;
 use bitt_synth::{SynthConfig, SynthScene};
 
 use crate::device::DeviceName;
+use crate::refine_hands::{RefineBar, refine_config};
 
 /// Arguments of `bitt train-scene`.
 #[derive(Debug, clap::Args)]
@@ -105,6 +108,14 @@ pub struct TrainSceneArgs {
     /// Seed of the network initialisation.
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Refine the given meshes against the training image before training (pose, shape,
+    /// root and translation through the renderer; see `bitt refine-hands`). The run folder
+    /// gets `refine.json` and `overlay.png`, and trains on the refined meshes.
+    #[arg(long)]
+    pub refine_mesh: bool,
+    /// A refinement configuration (JSON) for --refine-mesh.
+    #[arg(long, requires = "refine_mesh")]
+    pub refine_config: Option<PathBuf>,
 }
 
 /// A one-line progress bar on stderr; Ctrl-C sets `stop`.
@@ -195,8 +206,18 @@ fn fresh(
     args: &TrainSceneArgs,
     config: TrainConfig,
     device: &burn::tensor::Device,
-) -> Result<(Trainer, Input)> {
+) -> Result<(Trainer, Input, Option<Refinement>)> {
     let cache = Some(args.cache.as_path());
+    let refine_config = if args.refine_mesh {
+        Some(refine_config(args.refine_config.as_deref(), None, None)?)
+    } else {
+        None
+    };
+    let mut bar = RefineBar::new();
+    let mut refine = refine_config.as_ref().map(|config| MeshRefine {
+        config,
+        observer: &mut bar,
+    });
     let real = args.image.is_some() || args.interhand.is_some();
     if !real && (args.model_dir.is_some() || args.html_dir.is_some()) {
         bail!(
@@ -221,17 +242,36 @@ fn fresh(
                 "procedural PCA"
             },
         );
-        let setup = annotation_setup(image, annotation, &hands, &prior, config, cache, device)
-            .with_context(|| {
-                format!(
-                    "real data --image {} --annotation {}",
-                    image.display(),
-                    annotation.display()
-                )
-            })?;
+        let setup = annotation_setup(
+            image,
+            annotation,
+            &hands,
+            &prior,
+            config,
+            cache,
+            refine.take(),
+            device,
+        )
+        .with_context(|| {
+            format!(
+                "real data --image {} --annotation {}",
+                image.display(),
+                annotation.display()
+            )
+        })?;
+        if setup.refinement.is_none() {
+            for n in pca_pose_notes(
+                &setup.trainer.assets.models,
+                &setup.input.train.hands,
+                "its fingers are posed by meaningless numbers (add --refine-mesh to fit them to the photo)",
+            ) {
+                eprintln!("note: {n}");
+            }
+        }
         return Ok((
             setup.trainer,
             Input::Real(Box::new(setup.input), Box::new(setup.scene)),
+            setup.refinement,
         ));
     }
     if let Some(root) = &args.interhand {
@@ -265,14 +305,16 @@ fn fresh(
             &prior,
             config,
             cache,
+            refine.take(),
             device,
         )?;
         return Ok((
             setup.trainer,
             Input::Real(Box::new(setup.input), Box::new(setup.scene)),
+            setup.refinement,
         ));
     }
-    let scene = match &args.scene {
+    let mut scene = match &args.scene {
         Some(dir) => SynthScene::read(dir).with_context(|| format!("--scene {}", dir.display()))?,
         None => {
             eprintln!(
@@ -292,8 +334,26 @@ fn fresh(
         config.texture.components
     );
     let pca = texture_prior(&config, cache, &device.clone().inner())?;
+    let refinement = match refine {
+        Some(r) => {
+            eprintln!("refining the given meshes against the training image");
+            let assets = HandAssets::new(bitt_mesh::procedural_pair(), config.texture.resolution)?;
+            let done = refine_synthetic(
+                &scene,
+                &assets,
+                &pca,
+                config.nets.image_size,
+                r.config,
+                device,
+                r.observer,
+            )?;
+            scene.given = done.hands.clone();
+            Some(done)
+        }
+        None => None,
+    };
     let trainer = synthetic_trainer(&scene, &config, &pca, device)?;
-    Ok((trainer, Input::Synthetic(Box::new(scene))))
+    Ok((trainer, Input::Synthetic(Box::new(scene)), refinement))
 }
 
 /// A resumed run's trainer (checkpoint restored) and input.
@@ -417,7 +477,7 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
             config.validate()?;
             // Every input is read and checked (and the trainer built) before the run folder
             // is created, so a bad input leaves nothing behind.
-            let (trainer, input) = fresh(args, config, &device)?;
+            let (trainer, input, refinement) = fresh(args, config, &device)?;
             std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
             bitt_mesh::export::write_atomically(
                 &out.join(files::CONFIG),
@@ -426,6 +486,20 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
             match &input {
                 Input::Synthetic(scene) => scene.write(&out.join(files::SCENE))?,
                 Input::Real(record, scene) => record.write(&out, scene)?,
+            }
+            if let Some(r) = &refinement {
+                let truth = match &input {
+                    Input::Synthetic(scene) => Some(&scene.train.hands),
+                    Input::Real(..) => None,
+                };
+                write_training_refinement(&out, &trainer, r, truth)?;
+                for n in &r.report.notes {
+                    eprintln!("note: {n}");
+                }
+                eprintln!(
+                    "refined the meshes in {:.1} s: silhouette IoU against the hand mask {:.4} -> {:.4}",
+                    r.report.seconds, r.report.iou_before, r.report.iou_after
+                );
             }
             (out, trainer, input)
         }

@@ -248,13 +248,184 @@ pub fn scene_from_bitt_annotation(
     })
 }
 
-/// Reads a BiTT/InterHand annotation pickle file.
+/// Reads a two-hand annotation: a BiTT/InterHand annotation pickle, or a `hands.json` as
+/// written by [`hands_json`] (`bitt refine-hands`), told apart by content. `image_size` is
+/// the image size of a pickle's `K`; a `hands.json` carries its own.
 pub fn load_bitt_annotation(
     path: &Path,
     image_size: (u32, u32),
 ) -> Result<TwoHandScene, MeshError> {
-    let root = bitt_pickle::from_path(path)?;
+    let name = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|e| {
+        bitt_pickle::PickleError::new(name.clone(), 0, bitt_pickle::PickleErrorKind::Io(e))
+    })?;
+    if bytes.iter().find(|b| !b.is_ascii_whitespace()) == Some(&b'{') {
+        return scene_from_hands_json(&bytes, path);
+    }
+    let root = bitt_pickle::from_bytes(&bytes, &name)?;
     scene_from_bitt_annotation(&root, path, image_size)
+}
+
+// ---------------------------------------------------------------------------------------------
+// hands.json: refined hands (axis-angle poses) and their camera.
+
+/// The `format` value of a `hands.json`.
+pub const HANDS_JSON_FORMAT: &str = "bitt-hands/1";
+
+#[derive(serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct HandsJsonCamera {
+    /// Intrinsics, row-major rows.
+    #[serde(rename = "K")]
+    k: [[f64; 3]; 3],
+    /// World-to-camera rotation, rows.
+    #[serde(rename = "R")]
+    r: [[f64; 3]; 3],
+    /// World-to-camera translation.
+    t: [f64; 3],
+    width: u32,
+    height: u32,
+}
+
+#[derive(serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct HandsJsonHand {
+    /// Root rotation, rows.
+    #[serde(rename = "R")]
+    r: [[f64; 3]; 3],
+    /// Finger axis-angles, 15 joints x 3, in MANO's joint order.
+    pose: Vec<f64>,
+    /// Betas.
+    shape: Vec<f64>,
+    /// Translation.
+    trans: [f64; 3],
+}
+
+#[derive(serde::Serialize, serde::Deserialize)]
+struct HandsJson {
+    format: String,
+    camera: HandsJsonCamera,
+    left: Option<HandsJsonHand>,
+    right: Option<HandsJsonHand>,
+    #[serde(default)]
+    frame: FrameInfo,
+}
+
+fn rows(m: DMat3) -> [[f64; 3]; 3] {
+    let t = m.transpose();
+    [
+        t.x_axis.to_array(),
+        t.y_axis.to_array(),
+        t.z_axis.to_array(),
+    ]
+}
+
+fn from_rows(r: &[[f64; 3]; 3]) -> DMat3 {
+    DMat3::from_cols(
+        DVec3::from_array(r[0]),
+        DVec3::from_array(r[1]),
+        DVec3::from_array(r[2]),
+    )
+    .transpose()
+}
+
+/// A scene as `hands.json` text: the camera, and per hand its root rotation `R`, the finger
+/// pose as absolute axis-angles (PCA and mean-relative poses expanded with `models`), the
+/// shape and the translation.
+///
+/// # Errors
+/// [`MeshError::InvalidParams`] for invalid hand parameters.
+pub fn hands_json(scene: &TwoHandScene, models: &HandPair) -> Result<String, MeshError> {
+    let hand = |side: Side| -> Result<Option<HandsJsonHand>, MeshError> {
+        let Some(p) = scene.hand(side) else {
+            return Ok(None);
+        };
+        p.validate()?;
+        Ok(Some(HandsJsonHand {
+            r: rows(p.root_rotation),
+            pose: models.get(side).pose_axis_angles(&p.pose),
+            shape: p.betas.clone(),
+            trans: p.trans.to_array(),
+        }))
+    };
+    let c = &scene.camera;
+    let file = HandsJson {
+        format: HANDS_JSON_FORMAT.into(),
+        camera: HandsJsonCamera {
+            k: rows(c.intrinsics),
+            r: rows(c.rotation),
+            t: c.translation.to_array(),
+            width: c.width,
+            height: c.height,
+        },
+        left: hand(Side::Left)?,
+        right: hand(Side::Right)?,
+        frame: scene.frame.clone(),
+    };
+    Ok(serde_json::to_string_pretty(&file).expect("plain data serialises") + "\n")
+}
+
+/// Reads `hands.json` bytes (see [`hands_json`]); `path` names the file in errors.
+///
+/// # Errors
+/// [`MeshError::Format`] for malformed JSON, a wrong `format`, wrong lengths, NaN, no hand,
+/// or an invalid rotation or camera.
+pub fn scene_from_hands_json(bytes: &[u8], path: &Path) -> Result<TwoHandScene, MeshError> {
+    let file: HandsJson = serde_json::from_slice(bytes)
+        .map_err(|e| MeshError::format(path, format!("not a hands.json: {e}")))?;
+    if file.format != HANDS_JSON_FORMAT {
+        return Err(MeshError::format(
+            path,
+            format!(
+                "format is `{}`, expected `{HANDS_JSON_FORMAT}`",
+                file.format
+            ),
+        ));
+    }
+    let hand = |h: Option<HandsJsonHand>, side: Side| -> Result<Option<HandParams>, MeshError> {
+        let Some(h) = h else { return Ok(None) };
+        let p = HandParams {
+            root_rotation: from_rows(&h.r),
+            pose: HandPose::AxisAngle(h.pose),
+            betas: h.shape,
+            trans: DVec3::from_array(h.trans),
+        };
+        p.validate()
+            .map_err(|e| MeshError::format(path, format!("{side} hand: {e}")))?;
+        Ok(Some(p))
+    };
+    let left = hand(file.left, Side::Left)?;
+    let right = hand(file.right, Side::Right)?;
+    if left.is_none() && right.is_none() {
+        return Err(MeshError::format(path, "neither hand is given"));
+    }
+    let c = &file.camera;
+    let finite =
+        c.k.iter()
+            .chain(&c.r)
+            .flatten()
+            .chain(&c.t)
+            .all(|x| x.is_finite());
+    if !finite {
+        return Err(MeshError::format(
+            path,
+            "the camera holds NaN or infinite values",
+        ));
+    }
+    let camera = PinholeCamera::new(
+        from_rows(&c.k),
+        from_rows(&c.r),
+        DVec3::from_array(c.t),
+        c.width,
+        c.height,
+    )
+    .map_err(|e| MeshError::format(path, e.to_string()))?;
+    Ok(TwoHandScene {
+        left,
+        right,
+        camera,
+        frame: file.frame,
+    })
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -466,5 +637,62 @@ mod tests {
         assert!(e.contains("m.json") && e.contains("7.99"), "{e}");
         let e = read("7", "1234", "nope").unwrap_err().to_string();
         assert!(e.contains("c.json") && e.contains("nope"), "{e}");
+    }
+
+    #[test]
+    fn hands_json_round_trips_and_refuses_bad_files() {
+        let models = crate::procedural_pair();
+        let cam = PinholeCamera::new(
+            DMat3::from_cols_array(&[500.0, 0.0, 0.0, 0.0, 510.0, 0.0, 64.0, 60.0, 1.0]),
+            DMat3::from_rotation_y(0.3),
+            DVec3::new(0.01, -0.02, 0.6),
+            128,
+            120,
+        )
+        .unwrap();
+        let hand = |x: f64| HandParams {
+            root_rotation: DMat3::from_rotation_z(x),
+            pose: HandPose::Pca((0..NUM_POSE).map(|i| i as f64 * 0.01 - x).collect()),
+            betas: vec![x; NUM_BETAS],
+            trans: DVec3::new(x, 0.1, 0.2),
+        };
+        let scene = TwoHandScene {
+            left: Some(hand(0.2)),
+            right: Some(hand(-0.4)),
+            camera: cam,
+            frame: FrameInfo::default(),
+        };
+        let text = hands_json(&scene, &models).unwrap();
+        let dir = std::env::temp_dir().join(format!("bitt-hands-json-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("hands.json");
+        std::fs::write(&path, &text).unwrap();
+        let back = load_bitt_annotation(&path, (1, 1)).unwrap();
+        assert_eq!(back.camera.width, 128);
+        let a = scene.pose_in_camera(&models).unwrap();
+        let b = back.pose_in_camera(&models).unwrap();
+        for (p, q) in a
+            .left
+            .unwrap()
+            .vertices
+            .iter()
+            .zip(&b.left.unwrap().vertices)
+        {
+            assert!(p.distance(*q) < 1e-12);
+        }
+        assert!(matches!(back.right.unwrap().pose, HandPose::AxisAngle(_)));
+
+        let bad = text.replacen("\"trans\": [\n      0.2", "\"trans\": [\n      NaN", 1);
+        for (name, body) in [
+            ("nan.json", bad.as_str()),
+            ("format.json", &text.replace(HANDS_JSON_FORMAT, "other/1")),
+            ("short.json", &text[..text.len() / 2]),
+        ] {
+            let p = dir.join(name);
+            std::fs::write(&p, body).unwrap();
+            let e = load_bitt_annotation(&p, (1, 1)).unwrap_err().to_string();
+            assert!(e.contains(name), "{e}");
+        }
+        std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -10,6 +10,8 @@
 //! - [`metrics`], [`evaluate`]: image and texture metrics, renders at other views and poses.
 //! - [`lpips`]: LPIPS-VGG with user-provided weights (unavailable without them).
 //! - [`outputs`], [`run`]: the run folder (textures, renders, avatar, metrics, report).
+//! - [`hand_layer`]: the hand model as a differentiable burn function (both hands batched).
+//! - [`refine`]: mesh refinement of both hands against the photo through the renderer.
 //! - [`real`]: real data (an image + annotation pickle, InterHand2.6M scenes), real runs.
 
 pub mod assets;
@@ -19,6 +21,7 @@ pub mod checkpoint;
 pub mod config;
 mod error;
 pub mod evaluate;
+pub mod hand_layer;
 pub mod input;
 pub mod losses;
 pub mod lpips;
@@ -27,6 +30,7 @@ pub mod optim;
 pub mod outputs;
 pub mod pipeline;
 pub mod real;
+pub mod refine;
 pub mod run;
 pub mod trainer;
 

@@ -348,8 +348,32 @@ pub fn texel_l1(a: &[f32], b: &[f32], select: &[bool]) -> Option<f64> {
     (n > 0).then(|| sum / n as f64)
 }
 
+/// Intersection over union of two masks (values > 0.5 are inside); 1 when both are empty.
+pub fn mask_iou(a: &[f32], b: &[f32]) -> f64 {
+    let (mut inter, mut union) = (0usize, 0usize);
+    for (x, y) in a.iter().zip(b) {
+        let (x, y) = (*x > 0.5, *y > 0.5);
+        inter += usize::from(x && y);
+        union += usize::from(x || y);
+    }
+    if union == 0 {
+        1.0
+    } else {
+        inter as f64 / union as f64
+    }
+}
+
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn mask_iou_counts_pixels() {
+        assert_eq!(
+            mask_iou(&[1.0, 1.0, 0.0, 0.0], &[1.0, 0.0, 1.0, 0.0]),
+            1.0 / 3.0
+        );
+        assert_eq!(mask_iou(&[0.0; 3], &[0.0; 3]), 1.0);
+    }
     use super::*;
 
     fn ramp(c: usize, h: usize, w: usize, f: impl Fn(usize, usize, usize) -> f32) -> Vec<f32> {

@@ -65,6 +65,7 @@ use crate::BittError;
 use crate::assets::{HandAssets, ViewGeometry};
 use crate::config::TrainConfig;
 use crate::input::{ImageInput, fit_camera};
+use crate::refine::{MeshRefine, Refinement, refine_view};
 use crate::trainer::{Trainer, read};
 
 /// The reference's `HAND_BBOX_RATIO`: the hands' box fills this fraction of the crop's side.
@@ -547,16 +548,13 @@ pub fn reference_crop_box(b: [f64; 4]) -> [f64; 4] {
     [cx - half, cy - half, cx + half, cy + half]
 }
 
-/// Crops an image `[3, H, W]` (with its full camera in `hands`) around the hands as the
-/// reference does and resizes it to `size`.
-pub fn prepare_view(
-    name: &str,
-    source: &Path,
-    image: Vec<f32>,
+/// The pixel box of both hands ([`hands_box`]), refused when it lies outside the image (the
+/// image at `source` and its annotation do not belong together).
+pub fn hands_in_image(
     hands: &TwoHandScene,
     models: &HandPair,
-    size: usize,
-) -> Result<RealView, BittError> {
+    source: &Path,
+) -> Result<[f64; 4], BittError> {
     let b = hands_box(hands, models)
         .map_err(|e| BittError::Invalid(format!("{}: {e}", source.display())))?;
     let (w, h) = (
@@ -574,6 +572,20 @@ pub fn prepare_view(
             b[3]
         )));
     }
+    Ok(b)
+}
+
+/// Crops an image `[3, H, W]` (with its full camera in `hands`) around the hands as the
+/// reference does and resizes it to `size`.
+pub fn prepare_view(
+    name: &str,
+    source: &Path,
+    image: Vec<f32>,
+    hands: &TwoHandScene,
+    models: &HandPair,
+    size: usize,
+) -> Result<RealView, BittError> {
+    let b = hands_in_image(hands, models, source)?;
     let input = ImageInput {
         image,
         mask: None,
@@ -592,7 +604,7 @@ pub fn prepare_view(
 }
 
 /// Reads an image, checking its size against the camera's.
-fn read_image(path: &Path, camera: &PinholeCamera, what: &str) -> Result<Vec<f32>, BittError> {
+pub fn read_image(path: &Path, camera: &PinholeCamera, what: &str) -> Result<Vec<f32>, BittError> {
     let img = load_image(path)?;
     if (img.width as u32, img.height as u32) != (camera.width, camera.height) {
         return Err(BittError::Invalid(format!(
@@ -681,10 +693,30 @@ pub fn real_trainer(
     hands: &TwoHandScene,
     models: HandPair,
     prior: &PriorSource,
-    mut config: TrainConfig,
+    config: TrainConfig,
     cache: Option<&Path>,
     device: &Device,
 ) -> Result<Trainer, BittError> {
+    let mut hands = hands.clone();
+    let (trainer, _) = refined_real_trainer(
+        view_image, &mut hands, models, prior, config, cache, None, device,
+    )?;
+    Ok(trainer)
+}
+
+/// [`real_trainer`] that first refines the view's hands against its image when `refine` is
+/// given (`hands` is replaced by the refined hands, same camera), returning the refinement.
+#[allow(clippy::too_many_arguments)]
+pub fn refined_real_trainer(
+    view_image: &[f32],
+    hands: &mut TwoHandScene,
+    models: HandPair,
+    prior: &PriorSource,
+    mut config: TrainConfig,
+    cache: Option<&Path>,
+    refine: Option<MeshRefine<'_>>,
+    device: &Device,
+) -> Result<(Trainer, Option<Refinement>), BittError> {
     let s = config.nets.image_size;
     if [hands.camera.width, hands.camera.height] != [s as u32, s as u32] {
         return Err(BittError::Invalid(format!(
@@ -694,8 +726,27 @@ pub fn real_trainer(
     }
     let assets = HandAssets::new(models, config.texture.resolution)?;
     let pca = texture_model(&mut config, prior, &assets, cache, &device.clone().inner())?;
+    let refinement = match refine {
+        Some(r) => {
+            let done = refine_view(
+                &assets,
+                &pca,
+                hands,
+                view_image,
+                None,
+                r.config,
+                device,
+                r.observer,
+                "the training view",
+            )?;
+            *hands = done.hands.clone();
+            Some(done)
+        }
+        None => None,
+    };
     let geometry = ViewGeometry::new(&assets, hands, device)?;
-    Trainer::new(config, assets, &pca, geometry, view_image, None, device)
+    let trainer = Trainer::new(config, assets, &pca, geometry, view_image, None, device)?;
+    Ok((trainer, refinement))
 }
 
 /// Everything a fresh real run starts from: the record, the prepared views and the trainer.
@@ -707,9 +758,12 @@ pub struct RealSetup {
     pub scene: RealScene,
     /// The trainer (its `config` possibly adapted to the prior).
     pub trainer: Trainer,
+    /// The mesh refinement of the training view, when asked for (its hands are the view's).
+    pub refinement: Option<Refinement>,
 }
 
 /// A fresh real run from an image and its BiTT annotation pickle.
+#[allow(clippy::too_many_arguments)]
 pub fn annotation_setup(
     image: &Path,
     annotation: &Path,
@@ -717,20 +771,23 @@ pub fn annotation_setup(
     prior: &PriorSource,
     config: TrainConfig,
     cache: Option<&Path>,
+    refine: Option<MeshRefine<'_>>,
     device: &Device,
 ) -> Result<RealSetup, BittError> {
     let models = load_models(hands, prior)?;
-    let view = annotation_view(image, annotation, &models, config.nets.image_size)?;
-    let trainer = real_trainer(
+    let mut view = annotation_view(image, annotation, &models, config.nets.image_size)?;
+    let (trainer, refinement) = refined_real_trainer(
         &view.image,
-        &view.hands,
+        &mut view.hands,
         models,
         prior,
         config,
         cache,
+        refine,
         device,
     )?;
     Ok(RealSetup {
+        refinement,
         input: RealInput {
             format: INPUT_FORMAT.into(),
             source: RealSource::Annotation {
@@ -756,6 +813,7 @@ pub fn annotation_setup(
 }
 
 /// A fresh real run from a selected InterHand2.6M scene.
+#[allow(clippy::too_many_arguments)]
 pub fn interhand_setup(
     scene: &InterHandScene,
     paths: &bitt_mesh::interhand::InterHandPaths,
@@ -763,17 +821,19 @@ pub fn interhand_setup(
     prior: &PriorSource,
     config: TrainConfig,
     cache: Option<&Path>,
+    refine: Option<MeshRefine<'_>>,
     device: &Device,
 ) -> Result<RealSetup, BittError> {
     let models = load_models(hands, prior)?;
-    let views = interhand_views(scene, &models, config.nets.image_size)?;
-    let trainer = real_trainer(
+    let mut views = interhand_views(scene, &models, config.nets.image_size)?;
+    let (trainer, refinement) = refined_real_trainer(
         &views.train.image,
-        &views.train.hands,
+        &mut views.train.hands,
         models,
         prior,
         config,
         cache,
+        refine,
         device,
     )?;
     let record = |v: &RealView| ViewRecord {
@@ -781,6 +841,7 @@ pub fn interhand_setup(
         ..ViewRecord::from(v)
     };
     Ok(RealSetup {
+        refinement,
         input: RealInput {
             format: INPUT_FORMAT.into(),
             source: RealSource::InterHand {

@@ -46,6 +46,76 @@ pub mod files {
     pub const LOSS_PLOT: &str = "loss.png";
     /// The scene a run was trained on (synthetic runs), to resume without the generator.
     pub const SCENE: &str = "scene";
+    /// The mesh refinement's report (`train-scene --refine-mesh`, `bitt refine-hands`).
+    pub const REFINE: &str = "refine.json";
+    /// The photo with the mesh outlines before (red) and after (green) refinement.
+    pub const REFINE_OVERLAY: &str = "overlay.png";
+}
+
+/// Writes a refinement's record into a run folder: `refine.json` (the report and whatever
+/// the caller adds) and `overlay.png`. [`write_run`] puts both into `metrics.json` and the
+/// report when they are there.
+pub fn write_refinement(
+    dir: &Path,
+    record: &serde_json::Value,
+    overlay: &[f32],
+    [h, w]: [usize; 2],
+) -> Result<(), BittError> {
+    write_png(&dir.join(files::REFINE_OVERLAY), overlay, h, w)?;
+    write_json(&dir.join(files::REFINE), record)
+}
+
+/// Writes the record of a refinement that ran before training (`train-scene --refine-mesh`):
+/// the overlay on the training view (outlines of the given and the refined hands) and
+/// `refine.json` with the report, plus, when the true hands are known (a synthetic scene),
+/// the projected vertex errors before and after.
+pub fn write_training_refinement(
+    dir: &Path,
+    trainer: &Trainer,
+    refinement: &crate::refine::Refinement,
+    truth: Option<&TwoHandScene>,
+) -> Result<(), BittError> {
+    let [_, _, _, w] = trainer.view.image.dims();
+    let image = read(trainer.view.image.clone().inner())?;
+    let camera = trainer.view.geometry.scene_camera;
+    let at_view = |s: &TwoHandScene| TwoHandScene {
+        camera,
+        ..s.clone()
+    };
+    let models = &trainer.assets.models;
+    let overlay = crate::refine::overlay(
+        &image,
+        models,
+        &trainer.assets.scene,
+        &at_view(&refinement.initial),
+        &at_view(&refinement.hands),
+        512usize.div_ceil(w.max(1)).clamp(1, 8),
+    )?;
+    let mut record = serde_json::json!({
+        "kind": "train-scene",
+        "report": refinement.report,
+    });
+    if let Some(truth) = truth {
+        let before = crate::refine::vertex_error_px(models, truth, &refinement.initial)?;
+        let after = crate::refine::vertex_error_px(models, truth, &refinement.hands)?;
+        record["vertex_error_px"] = serde_json::json!({
+            "before": {"mean": before.0, "max": before.1},
+            "after": {"mean": after.0, "max": after.1},
+        });
+    }
+    write_refinement(dir, &record, &overlay.0, overlay.1)
+}
+
+/// The `refine.json` of a run folder, if it has one.
+fn read_refinement(dir: &Path) -> Result<Option<serde_json::Value>, BittError> {
+    let path = dir.join(files::REFINE);
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(&path).map_err(|e| BittError::io(&path, e))?;
+    serde_json::from_str(&text)
+        .map(Some)
+        .map_err(|e| BittError::corrupt(&path, format!("not JSON: {e}")))
 }
 
 /// The texture PCA of `config.texture`, read from `cache_dir` when fitted before, else fitted
@@ -379,6 +449,16 @@ pub fn write_run(
         input_psnr,
         synthetic: synthetic_scores,
     };
+    let refinement = read_refinement(dir)?;
+    if refinement.is_some() && dir.join(files::REFINE_OVERLAY).is_file() {
+        gallery.insert(
+            0,
+            (
+                "mesh refinement: before (red), after (green)".into(),
+                dir.join(files::REFINE_OVERLAY),
+            ),
+        );
+    }
     let metrics = serde_json::json!({
         "summary": summary,
         "loss_terms": crate::LossTerms::NAMES,
@@ -386,9 +466,16 @@ pub fn write_run(
         "events": trainer.events,
         "visible_fraction": trainer.view.visible_fraction(),
         "num_texels": trainer.assets.num_texels(),
+        "refine": refinement,
     });
     write_json(&dir.join(files::METRICS), &metrics)?;
-    write_report(&dir.join(files::REPORT), trainer, &summary, &gallery)?;
+    write_report(
+        &dir.join(files::REPORT),
+        trainer,
+        &summary,
+        refinement.as_ref(),
+        &gallery,
+    )?;
     Ok(summary)
 }
 
@@ -506,6 +593,7 @@ fn write_report(
     path: &Path,
     trainer: &Trainer,
     summary: &RunSummary,
+    refinement: Option<&serde_json::Value>,
     gallery: &[(String, PathBuf)],
 ) -> Result<(), BittError> {
     let mut html = String::from(
@@ -553,6 +641,42 @@ fn write_report(
             f(t.fine_visible), f(t.coarse_visible), f(t.fine_invisible), f(t.coarse_invisible),
             f(t.fine_symmetric), f(t.coarse_symmetric), f(t.fine_hidden_both), f(t.coarse_hidden_both)
         ));
+        }
+    }
+    if let Some(r) = refinement {
+        let num = |k: &str| {
+            r["report"][k]
+                .as_f64()
+                .map_or("n/a".into(), |v| format!("{v:.3}"))
+        };
+        html.push_str(&format!(
+            "<h2>Mesh refinement</h2><p>The given meshes were refined against the photo \
+             before training ({} s). Silhouette IoU against the hand mask: {} before, {} after.</p>",
+            num("seconds"),
+            num("iou_before"),
+            num("iou_after")
+        ));
+        if let Some(stages) = r["report"]["stages"].as_array() {
+            html.push_str("<table><tr><th>stage</th><th>iterations</th><th>loss first</th><th>loss last</th><th>IoU</th><th>s</th></tr>");
+            for st in stages {
+                let f =
+                    |v: &serde_json::Value| v.as_f64().map_or("n/a".into(), |v| format!("{v:.4}"));
+                html.push_str(&format!(
+                    "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+                    escape(st["stage"].as_str().unwrap_or("")),
+                    st["iterations"],
+                    f(&st["first"]["total"]),
+                    f(&st["last"]["total"]),
+                    f(&st["iou"]),
+                    f(&st["seconds"]),
+                ));
+            }
+            html.push_str("</table>");
+        }
+        if let Some(notes) = r["report"]["notes"].as_array() {
+            for n in notes.iter().filter_map(|n| n.as_str()) {
+                html.push_str(&format!("<p>{}</p>", escape(n)));
+            }
         }
     }
     if !trainer.events.is_empty() {

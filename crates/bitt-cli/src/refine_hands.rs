@@ -1,0 +1,232 @@
+//! `bitt refine-hands`: fit both hands' pose, shape, root and translation to the photo
+//! through the differentiable renderer; writes `hands.json`, `refine.json` and `overlay.png`.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use bitt::refine::{
+    RefineConfig, RefineObserver, RefineProgress, refine_photo, refine_scene, write_refine_outputs,
+};
+use bitt_nets::Preset;
+use bitt_synth::SynthScene;
+
+use crate::device::DeviceName;
+use crate::train_scene::{sources, training_config};
+
+/// Arguments of `bitt refine-hands`.
+#[derive(Debug, clap::Args)]
+pub struct RefineHandsArgs {
+    /// A synthetic scene folder (`bitt synth`, e.g. with --mesh-noise): refine its given
+    /// meshes and score them against the true ones (projected vertex error, silhouette IoU).
+    #[arg(long, conflicts_with_all = ["image", "annotation"])]
+    pub scene: Option<PathBuf>,
+    /// A photo of two interacting hands (with --annotation).
+    #[arg(long, requires = "annotation")]
+    pub image: Option<PathBuf>,
+    /// The photo's BiTT annotation pickle (the demo `NN.pkl`) or a `hands.json`.
+    #[arg(long, requires = "image")]
+    pub annotation: Option<PathBuf>,
+    /// The photo's hand mask (an image of the photo's size, white = hand). Default: pixels
+    /// whose mean RGB is above 0.15 (the reference's rule for the demo frames).
+    #[arg(long, requires = "image")]
+    pub mask: Option<PathBuf>,
+    /// Folder with MANO_LEFT / MANO_RIGHT (`.pkl` or `.safetensors`); needs --html-dir.
+    /// Default: the procedural hands.
+    #[arg(long, conflicts_with = "procedural")]
+    pub model_dir: Option<PathBuf>,
+    /// Use the procedural hands (the default without --model-dir).
+    #[arg(long)]
+    pub procedural: bool,
+    /// HTML's TextureBasis folder, the texture prior of the photometric term (with
+    /// --model-dir). Default: the procedural texture PCA.
+    #[arg(long, requires = "model_dir")]
+    pub html_dir: Option<PathBuf>,
+    /// Preset whose image size (`quick`: 128) and texture prior the refinement uses.
+    #[arg(long, default_value = "quick")]
+    pub preset: Preset,
+    /// A training configuration file instead of --preset (its image size and texture prior).
+    #[arg(long, conflicts_with = "preset")]
+    pub config: Option<PathBuf>,
+    /// A refinement configuration (JSON, the `report.config` of a `refine.json`, edited).
+    #[arg(long)]
+    pub refine_config: Option<PathBuf>,
+    /// Working image size for a photo (default: 256, the BiTT crop the demo annotations are
+    /// for and the paper's image size; a scene is refined at the preset's image size).
+    #[arg(long)]
+    pub size: Option<usize>,
+    /// Iterations of the rigid stage (default 40).
+    #[arg(long)]
+    pub rigid_iterations: Option<usize>,
+    /// Iterations of the full stage (default 160).
+    #[arg(long)]
+    pub iterations: Option<usize>,
+    /// Backend.
+    #[arg(long, value_enum, default_value = "flex")]
+    pub device: DeviceName,
+    /// Output folder.
+    #[arg(long, default_value = "runs/refine-hands")]
+    pub out: PathBuf,
+    /// Cache folder for the fitted texture PCA.
+    #[arg(long, default_value = "runs/cache")]
+    pub cache: PathBuf,
+}
+
+/// A redrawn one-line bar on a terminal, plain lines every 20 iterations otherwise.
+pub(crate) struct RefineBar {
+    started: Instant,
+    terminal: bool,
+}
+
+impl RefineBar {
+    pub(crate) fn new() -> Self {
+        use std::io::IsTerminal;
+        RefineBar {
+            started: Instant::now(),
+            terminal: std::io::stderr().is_terminal(),
+        }
+    }
+}
+
+impl RefineObserver for RefineBar {
+    fn iteration(&mut self, p: &RefineProgress) {
+        let width = 30;
+        let filled = width * p.iteration / p.iterations.max(1);
+        let per = self.started.elapsed().as_secs_f64() / p.iteration.max(1) as f64;
+        let line = format!(
+            "refine [{}{}] {}/{} {:5} loss {:.4} IoU {:.3} {:.2} s/it",
+            "#".repeat(filled),
+            "-".repeat(width - filled),
+            p.iteration,
+            p.iterations,
+            p.stage,
+            p.terms.total,
+            p.iou,
+            per
+        );
+        if self.terminal {
+            eprint!("\r{line}   ");
+            if p.iteration == p.iterations {
+                eprintln!();
+            }
+        } else if p.iteration % 20 == 0 || p.iteration == 1 || p.iteration == p.iterations {
+            eprintln!("{line}");
+        }
+        let _ = std::io::stderr().flush();
+    }
+}
+
+/// The refinement configuration of the options.
+pub(crate) fn refine_config(
+    file: Option<&Path>,
+    rigid: Option<usize>,
+    full: Option<usize>,
+) -> Result<RefineConfig> {
+    let mut config = match file {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            serde_json::from_str(&text)
+                .with_context(|| format!("{}: not a refinement configuration", path.display()))?
+        }
+        None => RefineConfig::default(),
+    };
+    if let Some(n) = rigid {
+        config.rigid_iterations = n;
+    }
+    if let Some(n) = full {
+        config.full_iterations = n;
+    }
+    config.validate()?;
+    Ok(config)
+}
+
+/// `bitt refine-hands`.
+pub fn run(args: &RefineHandsArgs) -> Result<()> {
+    let device = args.device.device()?.autodiff();
+    let train = training_config(args.config.as_deref(), args.preset)?;
+    let config = refine_config(
+        args.refine_config.as_deref(),
+        args.rigid_iterations,
+        args.iterations,
+    )?;
+    let cache = Some(args.cache.as_path());
+    let mut bar = RefineBar::new();
+    if let Some(dir) = &args.scene {
+        if args.model_dir.is_some() || args.mask.is_some() {
+            bail!("--scene refines a synthetic scene's procedural hands: drop --model-dir/--mask");
+        }
+        let scene = SynthScene::read(dir).with_context(|| format!("--scene {}", dir.display()))?;
+        let done = refine_scene(&scene, &train, &config, cache, &device, &mut bar)
+            .with_context(|| format!("refining --scene {}", dir.display()))?;
+        write_refine_outputs(
+            &args.out,
+            &bitt_mesh::procedural_pair(),
+            &done.refinement.hands,
+            &done.record(),
+            &done.overlay,
+        )?;
+        print_notes(&done.refinement.report.notes);
+        let (b, a) = (done.vertex_error_before, done.vertex_error_after);
+        println!(
+            "projected vertex error: {:.2} px mean ({:.2} max) before, {:.2} px mean ({:.2} max) after",
+            b.0, b.1, a.0, a.1
+        );
+        println!(
+            "silhouette IoU against the true meshes: {:.4} before, {:.4} after; {:.1} s",
+            done.iou_truth_before, done.iou_truth_after, done.refinement.report.seconds
+        );
+    } else if let (Some(image), Some(annotation)) = (&args.image, &args.annotation) {
+        let (hands, prior) = sources(args.model_dir.as_deref(), args.html_dir.as_deref());
+        let size = args.size.unwrap_or(bitt::real::BITT_CROP_SIZE as usize);
+        if !(32..=1024).contains(&size) {
+            bail!("--size must be within 32-1024, got {size}");
+        }
+        let done = refine_photo(
+            image,
+            annotation,
+            args.mask.as_deref(),
+            &hands,
+            &prior,
+            &train,
+            size,
+            &config,
+            cache,
+            &device,
+            &mut bar,
+        )
+        .with_context(|| {
+            format!(
+                "refining --image {} --annotation {}",
+                image.display(),
+                annotation.display()
+            )
+        })?;
+        write_refine_outputs(
+            &args.out,
+            &done.models,
+            &done.refinement.hands,
+            &done.record(),
+            &done.overlay,
+        )?;
+        print_notes(&done.refinement.report.notes);
+        println!(
+            "silhouette IoU against the mask ({}): {:.4} before, {:.4} after; {:.1} s at {size}x{size}",
+            done.mask_source, done.iou_before, done.iou_after, done.refinement.report.seconds
+        );
+    } else {
+        bail!("give --scene DIR, or --image IMG --annotation FILE");
+    }
+    println!(
+        "wrote {0}/hands.json (use it as --annotation), {0}/refine.json and {0}/overlay.png",
+        args.out.display()
+    );
+    Ok(())
+}
+
+fn print_notes(notes: &[String]) {
+    for n in notes {
+        println!("note: {n}");
+    }
+}

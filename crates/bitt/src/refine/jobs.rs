@@ -1,0 +1,326 @@
+//! The two jobs of `bitt refine-hands` and their output folder: a synthetic scene's given
+//! meshes (scored against its true meshes) and a real photo with its annotation (scored
+//! against the hand mask).
+
+use std::path::Path;
+
+use bitt_mesh::{HandPair, TwoHandScene, procedural_pair};
+use bitt_synth::SynthScene;
+use burn::tensor::Device;
+
+use super::{
+    MASK_THRESHOLD, RefineConfig, RefineObserver, Refinement, overlay, refine_synthetic,
+    refine_view, silhouette, threshold_mask, vertex_error_px,
+};
+use crate::BittError;
+use crate::assets::HandAssets;
+use crate::config::TrainConfig;
+use crate::input::ImageInput;
+use crate::metrics::mask_iou;
+use crate::real::{
+    BITT_CROP_SIZE, HandSource, PriorSource, check_sources, hands_in_image, load_models,
+    read_image, reference_crop_box, texture_model,
+};
+
+/// The refined hands file of `bitt refine-hands`.
+pub const HANDS_JSON: &str = "hands.json";
+
+/// The overlay's enlargement: images are drawn at least this many pixels wide.
+const OVERLAY_MIN_SIDE: usize = 512;
+
+fn overlay_scale(width: usize) -> usize {
+    OVERLAY_MIN_SIDE.div_ceil(width.max(1)).clamp(1, 8)
+}
+
+/// A synthetic scene's refinement with its scores against the true meshes.
+#[derive(Debug, Clone)]
+pub struct SceneRefinement {
+    /// The refinement (hands at the scene's camera).
+    pub refinement: Refinement,
+    /// Mean and largest projected vertex error (pixels of the scene's image) of the given
+    /// meshes against the true ones.
+    pub vertex_error_before: (f64, f64),
+    /// ... of the refined meshes.
+    pub vertex_error_after: (f64, f64),
+    /// Silhouette IoU of the given meshes against the true meshes' silhouette.
+    pub iou_truth_before: f64,
+    /// ... of the refined meshes.
+    pub iou_truth_after: f64,
+    /// The training image with outlines before (red) and after (green), and its `[H, W]`.
+    pub overlay: (Vec<f32>, [usize; 2]),
+}
+
+impl SceneRefinement {
+    /// The record `refine.json` holds.
+    pub fn record(&self) -> serde_json::Value {
+        serde_json::json!({
+            "kind": "synthetic scene",
+            "report": self.refinement.report,
+            "vertex_error_px": {
+                "before": {"mean": self.vertex_error_before.0, "max": self.vertex_error_before.1},
+                "after": {"mean": self.vertex_error_after.0, "max": self.vertex_error_after.1},
+            },
+            "silhouette_iou_vs_truth": {
+                "before": self.iou_truth_before,
+                "after": self.iou_truth_after,
+            },
+        })
+    }
+}
+
+/// Refines the given meshes of a synthetic scene at `train`'s image size with `train`'s
+/// procedural texture prior (cached in `cache`), and scores them against the true meshes.
+///
+/// # Errors
+/// As [`refine_synthetic`].
+pub fn refine_scene(
+    scene: &SynthScene,
+    train: &TrainConfig,
+    config: &RefineConfig,
+    cache: Option<&Path>,
+    device: &Device,
+    observer: &mut dyn RefineObserver,
+) -> Result<SceneRefinement, BittError> {
+    let pca = crate::run::texture_prior(train, cache, &device.clone().inner())?;
+    let assets = HandAssets::new(procedural_pair(), train.texture.resolution)?;
+    let refinement = refine_synthetic(
+        scene,
+        &assets,
+        &pca,
+        train.nets.image_size,
+        config,
+        device,
+        observer,
+    )?;
+    let models = &assets.models;
+    let truth = &scene.train.hands;
+    let truth_mask = silhouette(models, truth, &assets.scene)?;
+    let iou = |hands: &TwoHandScene| -> Result<f64, BittError> {
+        Ok(mask_iou(
+            &silhouette(models, hands, &assets.scene)?,
+            &truth_mask,
+        ))
+    };
+    let image = &scene.train.image;
+    let w = scene.given.camera.width as usize;
+    Ok(SceneRefinement {
+        vertex_error_before: vertex_error_px(models, truth, &scene.given)?,
+        vertex_error_after: vertex_error_px(models, truth, &refinement.hands)?,
+        iou_truth_before: iou(&scene.given)?,
+        iou_truth_after: iou(&refinement.hands)?,
+        overlay: overlay(
+            image,
+            models,
+            &assets.scene,
+            &scene.given,
+            &refinement.hands,
+            overlay_scale(w),
+        )?,
+        refinement,
+    })
+}
+
+/// The box the photo is refined in (`fit_square` makes a square of it): the reference's crop
+/// around the hands, grown to hold every mask pixel (what the fit is scored against), within
+/// the photo.
+fn fit_box(hands: [f64; 4], mask: &[f32], [h, w]: [usize; 2]) -> [f64; 4] {
+    let mut b = reference_crop_box(hands);
+    for (p, _) in mask.iter().enumerate().filter(|(_, m)| **m > 0.5) {
+        let (x, y) = ((p % w) as f64, (p / w) as f64);
+        b = [
+            b[0].min(x),
+            b[1].min(y),
+            b[2].max(x + 1.0),
+            b[3].max(y + 1.0),
+        ];
+    }
+    let b = [
+        b[0].max(0.0),
+        b[1].max(0.0),
+        b[2].min(w as f64),
+        b[3].min(h as f64),
+    ];
+    // `fit_square` adds its margin around the box; this box already is the region wanted.
+    let k = 1.0 / (1.0 + crate::input::CROP_MARGIN);
+    let (cx, cy) = ((b[0] + b[2]) / 2.0, (b[1] + b[3]) / 2.0);
+    let (hw, hh) = ((b[2] - b[0]) / 2.0 * k, (b[3] - b[1]) / 2.0 * k);
+    [cx - hw, cy - hh, cx + hw, cy + hh]
+}
+
+/// A photo's refinement with its scores against the hand mask at the photo's size.
+#[derive(Debug, Clone)]
+pub struct PhotoRefinement {
+    /// The refinement (hands at the photo's camera).
+    pub refinement: Refinement,
+    /// The hand models.
+    pub models: HandPair,
+    /// Silhouette IoU of the given hands against the mask, at the photo's size.
+    pub iou_before: f64,
+    /// ... of the refined hands.
+    pub iou_after: f64,
+    /// Where the mask came from (`--mask FILE` or the threshold rule).
+    pub mask_source: String,
+    /// The photo with outlines before (red) and after (green), and its `[H, W]`.
+    pub overlay: (Vec<f32>, [usize; 2]),
+}
+
+impl PhotoRefinement {
+    /// The record `refine.json` holds.
+    pub fn record(&self) -> serde_json::Value {
+        serde_json::json!({
+            "kind": "photo",
+            "report": self.refinement.report,
+            "mask": self.mask_source,
+            "silhouette_iou_vs_mask": {"before": self.iou_before, "after": self.iou_after},
+        })
+    }
+}
+
+/// Reads a mask image (PNG or JPEG; a pixel is hand when its mean channel value is above 0.5)
+/// and checks it against the photo's size.
+///
+/// # Errors
+/// An unreadable file, or a size other than `[h, w]`.
+pub fn read_mask(path: &Path, [h, w]: [usize; 2]) -> Result<Vec<f32>, BittError> {
+    let img = bitt_texture::image_io::load_image(path)?;
+    if [img.height, img.width] != [h, w] {
+        return Err(BittError::Invalid(format!(
+            "{}: the mask is {}x{}, the photo {w}x{h}",
+            path.display(),
+            img.width,
+            img.height
+        )));
+    }
+    Ok(threshold_mask(&img.data, h * w, 0.5))
+}
+
+/// Refines the hands of a BiTT annotation (pickle or `hands.json`) against its photo, at
+/// `size` x `size` (the photo is cropped around the hands as the reference does and resized;
+/// the result is for the photo's own camera).
+///
+/// # Errors
+/// Missing or mismatched files, a mask of the wrong size or empty, an annotation with NaN or
+/// without both hands, hands outside the image; as [`refine_view`].
+#[allow(clippy::too_many_arguments)]
+pub fn refine_photo(
+    image: &Path,
+    annotation: &Path,
+    mask: Option<&Path>,
+    hands: &HandSource,
+    prior: &PriorSource,
+    train: &TrainConfig,
+    size: usize,
+    config: &RefineConfig,
+    cache: Option<&Path>,
+    device: &Device,
+    observer: &mut dyn RefineObserver,
+) -> Result<PhotoRefinement, BittError> {
+    check_sources(hands, prior)?;
+    if !image.is_file() {
+        return Err(BittError::io(
+            image,
+            std::io::Error::new(std::io::ErrorKind::NotFound, "input image not found"),
+        ));
+    }
+    let scene = bitt_mesh::load_bitt_annotation(annotation, (BITT_CROP_SIZE, BITT_CROP_SIZE))?;
+    for side in bitt_mesh::Side::BOTH {
+        if scene.hand(side).is_none() {
+            return Err(BittError::Invalid(format!(
+                "{}: the {side} hand is not annotated; refinement needs both hands",
+                annotation.display()
+            )));
+        }
+    }
+    let what = format!("the camera of {}", annotation.display());
+    let pixels = read_image(image, &scene.camera, &what)?;
+    let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
+    let (full_mask, mask_source) = match mask {
+        Some(m) => (read_mask(m, [h, w])?, m.display().to_string()),
+        None => (
+            threshold_mask(&pixels, h * w, MASK_THRESHOLD),
+            format!("mean RGB above {MASK_THRESHOLD}"),
+        ),
+    };
+    if !full_mask.iter().any(|&m| m > 0.5) {
+        return Err(BittError::Invalid(format!(
+            "{}: the hand mask is empty (no pixel is hand), so there is nothing to fit to",
+            mask.unwrap_or(image).display()
+        )));
+    }
+    let models = load_models(hands, prior)?;
+    let b = hands_in_image(&scene, &models, image)?;
+    let view = ImageInput {
+        image: pixels.clone(),
+        mask: Some(full_mask.clone()),
+        camera: scene.camera,
+    }
+    .fit_square(Some(fit_box(b, &full_mask, [h, w])), size)?;
+    let mut train = train.clone();
+    let assets = HandAssets::new(models, train.texture.resolution)?;
+    let pca = texture_model(&mut train, prior, &assets, cache, &device.clone().inner())?;
+    let view_hands = TwoHandScene {
+        camera: view.camera,
+        ..scene.clone()
+    };
+    let mut refinement = refine_view(
+        &assets,
+        &pca,
+        &view_hands,
+        &view.image,
+        view.mask,
+        config,
+        device,
+        observer,
+        &image.display().to_string(),
+    )?;
+    refinement.hands.camera = scene.camera;
+    refinement.initial.camera = scene.camera;
+    let models = &assets.models;
+    let iou = |s: &TwoHandScene| -> Result<f64, BittError> {
+        Ok(mask_iou(&silhouette(models, s, &assets.scene)?, &full_mask))
+    };
+    Ok(PhotoRefinement {
+        iou_before: iou(&scene)?,
+        iou_after: iou(&refinement.hands)?,
+        mask_source,
+        overlay: overlay(
+            &pixels,
+            models,
+            &assets.scene,
+            &scene,
+            &refinement.hands,
+            overlay_scale(w),
+        )?,
+        models: assets.models.clone(),
+        refinement,
+    })
+}
+
+/// Writes `hands.json`, `refine.json` and `overlay.png` into `out` (created if missing). A
+/// folder that exists, is not empty and holds no `refine.json` is not ours and is refused.
+///
+/// # Errors
+/// A foreign folder, or a write failure (each file is written atomically).
+pub fn write_refine_outputs(
+    out: &Path,
+    models: &HandPair,
+    hands: &TwoHandScene,
+    record: &serde_json::Value,
+    overlay: &(Vec<f32>, [usize; 2]),
+) -> Result<(), BittError> {
+    let files = crate::run::files::REFINE;
+    if out.is_dir() {
+        let mut entries = std::fs::read_dir(out).map_err(|e| BittError::io(out, e))?;
+        if entries.next().is_some() && !out.join(files).is_file() {
+            return Err(BittError::Invalid(format!(
+                "{}: the folder exists and is not a refine-hands output (no {files}); choose \
+                 another --out",
+                out.display()
+            )));
+        }
+    }
+    std::fs::create_dir_all(out).map_err(|e| BittError::io(out, e))?;
+    let text = bitt_mesh::annotation::hands_json(hands, models)?;
+    bitt_mesh::export::write_atomically(&out.join(HANDS_JSON), text.as_bytes())?;
+    crate::run::write_refinement(out, record, &overlay.0, overlay.1)
+}

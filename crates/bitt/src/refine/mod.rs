@@ -1,0 +1,1299 @@
+//! Mesh refinement: both hands' pose, shape, root and translation fitted to the photo through
+//! the differentiable renderer (the paper's future work, "refine 3D meshes"; HARP-style
+//! silhouette and photometric losses).
+//!
+//! The hands go through [`HandLayer`] (any `HandModel`), are projected with the view's camera
+//! and rasterized; the loss ([`RefineTerms`]) is
+//! - **silhouette**: the antialiased coverage ([`bitt_render::ops::antialias`], whose gradient
+//!   moves silhouette edges) against the hand mask, per mask pixel;
+//! - **outside** and **coverage**, a symmetric 2-D chamfer between the mesh and the mask that
+//!   reaches further than one pixel: each projected vertex pays the mask's distance transform
+//!   at its position (bilinear), and each mask pixel the render leaves uncovered pulls its
+//!   nearest projected vertex (pseudo-Huber, within `coverage_radius`);
+//! - **photometric**: `|render - I * mask|` under the current texture (the prior's PCA with
+//!   fitted coefficients, or the caller's fixed texture) and a fitted point light;
+//! - priors: finger pose near its start, joint-angle limits about each joint's flexion axis
+//!   (the axis of the model's mean pose, so MANO and the procedural hand alike), betas near 0,
+//!   and joint spheres of the two hands kept apart.
+//!
+//! Stages: `rigid` (root rotation and translation) then `all` (also finger pose and shape),
+//! Adam with a cosine-decayed step. Variables are offsets from the start in chosen units
+//! (radians, `translation_unit` metres, betas), so one step size suits all of them.
+//! Deterministic: no randomness, fixed pixel subsampling.
+
+mod jobs;
+
+use std::time::Instant;
+
+use bitt_mesh::glam::DVec3;
+use bitt_mesh::model::NUM_POSE;
+use bitt_mesh::{HandPair, HandParams, HandPose, PinholeCamera, Side, TwoHandScene};
+use bitt_nets::LightParams;
+use bitt_render::ops::{antialias, rasterize, texture};
+use bitt_render::scene::{Camera, DepthRange, RenderSettings, render};
+use bitt_texture::TexturePcaTensors;
+use burn::module::{Module, Param};
+use burn::tensor::{Device, Int, Tensor, TensorData};
+
+use crate::BittError;
+use crate::assets::HandAssets;
+use crate::config::OptimConfig;
+use crate::hand_layer::{HandLayer, HandLayerParams, has_learned_pose_pca, host_params};
+use crate::metrics::mask_iou;
+use crate::optim::Adam;
+use crate::pipeline::point_light;
+
+pub use jobs::{
+    HANDS_JSON, PhotoRefinement, SceneRefinement, read_mask, refine_photo, refine_scene,
+    write_refine_outputs,
+};
+
+/// Weights of the refinement loss terms.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct RefineWeights {
+    /// Antialiased silhouette vs mask (squared difference, per mask pixel).
+    pub silhouette: f64,
+    /// Mask distance (pixels) at each projected vertex, mean over vertices.
+    pub outside: f64,
+    /// Uncovered mask pixels to their nearest projected vertex (pixels, pseudo-Huber).
+    pub coverage: f64,
+    /// `|render - I * mask|` per covered-or-mask pixel and channel.
+    pub photometric: f64,
+    /// Squared finger-pose change from the start (radians^2, mean over values).
+    pub pose: f64,
+    /// Joint-angle limit violations (radians^2, summed).
+    pub limits: f64,
+    /// Squared betas (mean).
+    pub shape: f64,
+    /// Overlap of the two hands' joint spheres (squared, in sphere radii).
+    pub penetration: f64,
+}
+
+impl Default for RefineWeights {
+    fn default() -> Self {
+        RefineWeights {
+            silhouette: 1.0,
+            outside: 0.05,
+            coverage: 0.2,
+            photometric: 1.0,
+            pose: 0.5,
+            limits: 1.0,
+            shape: 0.01,
+            penetration: 0.1,
+        }
+    }
+}
+
+/// How to refine.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct RefineConfig {
+    /// Iterations of the rigid stage (root rotation and translation).
+    pub rigid_iterations: usize,
+    /// Iterations of the full stage (also finger pose and shape).
+    pub full_iterations: usize,
+    /// Adam step at the start of each stage (cosine decay to `final_lr_fraction` of it).
+    pub learning_rate: f64,
+    /// Final step as a fraction of `learning_rate`.
+    pub final_lr_fraction: f64,
+    /// Metres per unit of the translation variable.
+    pub translation_unit: f64,
+    /// Betas per unit of the shape variable.
+    pub shape_unit: f64,
+    /// Radians per unit of the finger-pose variable of a hand whose finger pose starts
+    /// uninformed (from the mean pose, the annotation's PCA being meaningless for the model):
+    /// its fingers have far to go, so they move this many times faster (1 radian per unit
+    /// otherwise).
+    pub uninformed_pose_unit: f64,
+    /// Mask pixels further than this from every projected vertex (pixels at 128 px; scaled
+    /// with the image) do not pull (forearms, background above the threshold).
+    pub coverage_radius: f64,
+    /// At most this many uncovered mask pixels pull per iteration (evenly subsampled).
+    pub coverage_samples: usize,
+    /// Radius of the joint spheres of the penetration prior (metres).
+    pub joint_radius: f64,
+    /// Fit the light and the texture PCA coefficients jointly (photometric term).
+    pub fit_appearance: bool,
+    /// The loss weights.
+    pub weights: RefineWeights,
+}
+
+impl Default for RefineConfig {
+    fn default() -> Self {
+        RefineConfig {
+            rigid_iterations: 40,
+            full_iterations: 300,
+            learning_rate: 0.01,
+            final_lr_fraction: 0.05,
+            translation_unit: 0.05,
+            shape_unit: 3.0,
+            uninformed_pose_unit: 3.0,
+            coverage_radius: 16.0,
+            coverage_samples: 1500,
+            joint_radius: 0.006,
+            fit_appearance: true,
+            weights: RefineWeights::default(),
+        }
+    }
+}
+
+impl RefineConfig {
+    /// Checks ranges.
+    ///
+    /// # Errors
+    /// [`BittError::Invalid`] naming the value.
+    pub fn validate(&self) -> Result<(), BittError> {
+        let positive = [
+            ("learning_rate", self.learning_rate),
+            ("translation_unit", self.translation_unit),
+            ("shape_unit", self.shape_unit),
+            ("uninformed_pose_unit", self.uninformed_pose_unit),
+            ("coverage_radius", self.coverage_radius),
+            ("joint_radius", self.joint_radius),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(BittError::Invalid(format!(
+                    "refine.{name} must be positive, got {v}"
+                )));
+            }
+        }
+        if !(0.0..=1.0).contains(&self.final_lr_fraction) {
+            return Err(BittError::Invalid(
+                "refine.final_lr_fraction must be within 0-1".into(),
+            ));
+        }
+        let w = &self.weights;
+        let all = [
+            w.silhouette,
+            w.outside,
+            w.coverage,
+            w.photometric,
+            w.pose,
+            w.limits,
+            w.shape,
+            w.penetration,
+        ];
+        if all.iter().any(|x| !(x.is_finite() && *x >= 0.0)) {
+            return Err(BittError::Invalid(
+                "refine.weights must be finite and non-negative".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The photo the hands are fitted to.
+#[derive(Debug, Clone)]
+pub struct RefineTarget {
+    /// The image `[3, H, W]` in `[0, 1]`.
+    pub image: Vec<f32>,
+    /// The two-hand mask `[H, W]` in `{0, 1}`.
+    pub mask: Vec<f32>,
+    /// The camera of the image (`hands` are in its world frame).
+    pub camera: PinholeCamera,
+}
+
+/// The reference's rule for a hand mask when none is given: pixels whose mean RGB is above
+/// this threshold (the demo frames' dark background).
+pub const MASK_THRESHOLD: f32 = 0.15;
+
+/// The threshold rule on the synthetic benchmark's renders (black background, mild sensor
+/// noise and JPEG): IoU against the true silhouettes of the first 4 benchmark scenes at 128 px
+/// is 0.969 / 0.996 / 0.991 / 0.977 at 0.08, against 0.824 / 0.997 / 0.995 / 0.834 at 0.15
+/// (dark skin falls below it) and 0.943 / 0.993 / 0.970 / 0.960 at 0.05 (noise rises above).
+pub const SYNTHETIC_MASK_THRESHOLD: f32 = 0.08;
+
+/// `mean_rgb > threshold` of an image `[3, H, W]`, as `[H, W]` 1/0.
+pub fn threshold_mask(image: &[f32], hw: usize, threshold: f32) -> Vec<f32> {
+    (0..hw)
+        .map(|p| {
+            let m = (image[p] + image[hw + p] + image[2 * hw + p]) / 3.0;
+            if m > threshold { 1.0 } else { 0.0 }
+        })
+        .collect()
+}
+
+impl RefineTarget {
+    /// A target from an image and an optional mask (`[H, W]`, values > 0.5 are hand); without
+    /// a mask, [`threshold_mask`] at [`MASK_THRESHOLD`].
+    ///
+    /// # Errors
+    /// Wrong sizes, non-finite values, or an empty mask. `what` names the inputs in messages.
+    pub fn new(
+        image: Vec<f32>,
+        mask: Option<Vec<f32>>,
+        camera: PinholeCamera,
+        what: &str,
+    ) -> Result<Self, BittError> {
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        if image.len() != 3 * w * h {
+            return Err(BittError::Invalid(format!(
+                "{what}: the image has {} values, the camera is for a {w}x{h} image",
+                image.len()
+            )));
+        }
+        if image.iter().any(|x| !x.is_finite()) {
+            return Err(BittError::NonFinite(format!("{what}: the image")));
+        }
+        let mask = match mask {
+            Some(m) => {
+                if m.len() != w * h {
+                    return Err(BittError::Invalid(format!(
+                        "{what}: the mask has {} pixels, the image {w}x{h} = {}",
+                        m.len(),
+                        w * h
+                    )));
+                }
+                if m.iter().any(|x| !x.is_finite()) {
+                    return Err(BittError::NonFinite(format!("{what}: the mask")));
+                }
+                m.into_iter()
+                    .map(|x| if x > 0.5 { 1.0 } else { 0.0 })
+                    .collect()
+            }
+            None => threshold_mask(&image, w * h, MASK_THRESHOLD),
+        };
+        let area = mask.iter().filter(|&&m| m > 0.5).count();
+        if area == 0 {
+            return Err(BittError::Invalid(format!(
+                "{what}: the hand mask is empty (no pixel is hand), so there is nothing to fit to"
+            )));
+        }
+        Ok(RefineTarget {
+            image,
+            mask,
+            camera,
+        })
+    }
+
+    fn size(&self) -> [usize; 2] {
+        [self.camera.height as usize, self.camera.width as usize]
+    }
+}
+
+/// The appearance the photometric term renders with.
+#[derive(Debug, Clone)]
+pub enum Appearance {
+    /// A texture PCA on the hands' layout: its coefficients are fitted (from 0, the mean)
+    /// with the light when `fit_appearance`, else the mean under the reference's light.
+    Prior(TexturePcaTensors),
+    /// Fixed compact textures `[3, T]` (left, right) and a fixed light (e.g. a trained run's).
+    Fixed {
+        /// Compact textures.
+        textures: [Tensor<2>; 2],
+        /// The light.
+        light: bitt_render::scene::LightValues,
+    },
+}
+
+/// The loss terms of one iteration (weighted values; `total` is their sum).
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RefineTerms {
+    /// Total.
+    pub total: f64,
+    /// Silhouette.
+    pub silhouette: f64,
+    /// Vertices outside the mask.
+    pub outside: f64,
+    /// Uncovered mask pixels.
+    pub coverage: f64,
+    /// Photometric.
+    pub photometric: f64,
+    /// Pose prior.
+    pub pose: f64,
+    /// Joint limits.
+    pub limits: f64,
+    /// Shape prior.
+    pub shape: f64,
+    /// Hand-hand penetration.
+    pub penetration: f64,
+}
+
+/// Progress of one iteration.
+#[derive(Debug, Clone)]
+pub struct RefineProgress {
+    /// `rigid` or `all`.
+    pub stage: &'static str,
+    /// Iteration within the whole refinement (1-based).
+    pub iteration: usize,
+    /// Iterations of the whole refinement.
+    pub iterations: usize,
+    /// This iteration's terms.
+    pub terms: RefineTerms,
+    /// Silhouette IoU against the mask (before this iteration's step).
+    pub iou: f64,
+}
+
+/// One stage's summary.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct StageReport {
+    /// `rigid` or `all`.
+    pub stage: String,
+    /// Iterations run.
+    pub iterations: usize,
+    /// Terms at the stage's first iteration.
+    pub first: RefineTerms,
+    /// Terms at its last iteration.
+    pub last: RefineTerms,
+    /// IoU against the mask at the end of the stage.
+    pub iou: f64,
+    /// Wall-clock seconds.
+    pub seconds: f64,
+}
+
+/// What [`refine_hands`] did.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RefineReport {
+    /// Silhouette IoU of the given hands against the mask.
+    pub iou_before: f64,
+    /// ... of the refined hands.
+    pub iou_after: f64,
+    /// Per stage.
+    pub stages: Vec<StageReport>,
+    /// Seconds in all.
+    pub seconds: f64,
+    /// Image size `[H, W]`.
+    pub image_size: [usize; 2],
+    /// One line per thing the user should know (e.g. a finger pose that was not usable).
+    pub notes: Vec<String>,
+    /// The configuration it ran with.
+    pub config: RefineConfig,
+}
+
+/// The refined hands and the report.
+#[derive(Debug, Clone)]
+pub struct Refinement {
+    /// The refined scene: same camera and frame, poses as axis-angles.
+    pub hands: TwoHandScene,
+    /// The hands it started from, as given.
+    pub initial: TwoHandScene,
+    /// The report.
+    pub report: RefineReport,
+}
+
+/// Called after every iteration.
+pub trait RefineObserver {
+    /// One iteration done.
+    fn iteration(&mut self, progress: &RefineProgress);
+}
+
+/// An observer that ignores everything.
+#[derive(Debug, Default)]
+pub struct Quiet;
+
+impl RefineObserver for Quiet {
+    fn iteration(&mut self, _: &RefineProgress) {}
+}
+
+/// The optimised offsets from the start.
+#[derive(Module, Debug)]
+struct RefineVars {
+    root: Param<Tensor<2>>,
+    trans: Param<Tensor<2>>,
+    pose: Param<Tensor<2>>,
+    betas: Param<Tensor<2>>,
+    texture: Param<Tensor<2>>,
+    light: Param<Tensor<2>>,
+}
+
+fn float<const D: usize>(v: Vec<f32>, shape: [usize; D], device: &Device) -> Tensor<D> {
+    Tensor::from_data(TensorData::new(v, shape), device)
+}
+
+fn scalar(t: Tensor<1>) -> f64 {
+    t.into_data()
+        .convert::<f32>()
+        .try_into_vec::<f32>()
+        .ok()
+        .and_then(|v| v.first().copied())
+        .map_or(f64::NAN, f64::from)
+}
+
+fn host<const D: usize>(t: Tensor<D>) -> Vec<f32> {
+    t.into_data()
+        .convert::<f32>()
+        .try_into_vec::<f32>()
+        .unwrap_or_default()
+}
+
+/// Exact Euclidean distance (pixels) from every pixel to the nearest pixel of `mask`
+/// (`[H, W]`, > 0.5 is inside; 0 inside), Felzenszwalb and Huttenlocher's two passes.
+pub fn distance_to_mask(mask: &[f32], [h, w]: [usize; 2]) -> Vec<f32> {
+    const INF: f64 = 1e20;
+    let mut g = vec![0.0f64; h * w];
+    for (i, m) in mask.iter().enumerate() {
+        g[i] = if *m > 0.5 { 0.0 } else { INF };
+    }
+    fn pass(f: &[f64], out: &mut [f64]) {
+        let n = f.len();
+        let mut v = vec![0usize; n];
+        let mut z = vec![0.0f64; n + 1];
+        let mut k = 0usize;
+        v[0] = 0;
+        z[0] = f64::NEG_INFINITY;
+        z[1] = f64::INFINITY;
+        for q in 1..n {
+            loop {
+                let p = v[k];
+                let s =
+                    ((f[q] + (q * q) as f64) - (f[p] + (p * p) as f64)) / (2.0 * (q - p) as f64);
+                if s <= z[k] && k > 0 {
+                    k -= 1;
+                    continue;
+                }
+                if s <= z[k] {
+                    // k == 0 and the new parabola dominates everywhere.
+                    v[0] = q;
+                    z[0] = f64::NEG_INFINITY;
+                    z[1] = f64::INFINITY;
+                    break;
+                }
+                k += 1;
+                v[k] = q;
+                z[k] = s;
+                z[k + 1] = f64::INFINITY;
+                break;
+            }
+        }
+        k = 0;
+        for (q, o) in out.iter_mut().enumerate() {
+            while z[k + 1] < q as f64 {
+                k += 1;
+            }
+            let p = v[k];
+            let d = q as f64 - p as f64;
+            *o = d * d + f[p];
+        }
+    }
+    let mut col = vec![0.0; h];
+    let mut out = vec![0.0; h];
+    for x in 0..w {
+        for y in 0..h {
+            col[y] = g[y * w + x];
+        }
+        pass(&col, &mut out);
+        for y in 0..h {
+            g[y * w + x] = out[y];
+        }
+    }
+    let mut row = vec![0.0; w];
+    let mut out = vec![0.0; w];
+    for y in 0..h {
+        row.copy_from_slice(&g[y * w..(y + 1) * w]);
+        pass(&row, &mut out);
+        g[y * w..(y + 1) * w].copy_from_slice(&out);
+    }
+    g.into_iter().map(|d| d.sqrt() as f32).collect()
+}
+
+/// The 20 bones of the 21 output joints (child, parent): each finger's chain from the wrist.
+fn bones() -> Vec<(usize, usize)> {
+    let mut b = Vec::new();
+    for f in 0..5 {
+        for k in 0..4 {
+            let child = 1 + 4 * f + k;
+            let parent = if k == 0 { 0 } else { child - 1 };
+            b.push((child, parent));
+        }
+    }
+    b
+}
+
+/// Unit flexion axis of each finger joint, from the model's mean pose (zero where the mean
+/// pose does not bend the joint), `[45]`.
+fn flexion_axes(models: &HandPair) -> Vec<f32> {
+    let mut axes = Vec::with_capacity(2 * NUM_POSE);
+    for side in Side::BOTH {
+        let mean = &models.get(side).pose_pca_mean;
+        for j in 0..15 {
+            let a = DVec3::new(mean[3 * j], mean[3 * j + 1], mean[3 * j + 2]);
+            let u = if a.length() > 1e-3 {
+                a.normalize()
+            } else {
+                DVec3::ZERO
+            };
+            axes.extend([u.x as f32, u.y as f32, u.z as f32]);
+        }
+    }
+    axes
+}
+
+/// Joint-angle limits: flexion between these (radians) about each joint's flexion axis, and
+/// at most `OFF_AXIS_LIMIT` of rotation about other axes.
+const FLEXION_RANGE: (f32, f32) = (-0.4, 2.0);
+const OFF_AXIS_LIMIT: f32 = 0.8;
+
+/// Whether hand `side` of `params` gives PCA coefficients that its model cannot interpret
+/// (a model without a learned pose PCA: the coefficients are meant for MANO's basis).
+fn uninterpretable_pca(models: &HandPair, side: Side, params: &HandParams) -> bool {
+    matches!(params.pose, HandPose::Pca(_)) && !has_learned_pose_pca(models.get(side))
+}
+
+/// One line per hand of `hands` whose finger pose is PCA coefficients its model cannot
+/// interpret, ending in `consequence`.
+pub fn pca_pose_notes(models: &HandPair, hands: &TwoHandScene, consequence: &str) -> Vec<String> {
+    Side::BOTH
+        .into_iter()
+        .filter(|&side| {
+            hands
+                .hand(side)
+                .is_some_and(|p| uninterpretable_pca(models, side, p))
+        })
+        .map(|side| {
+            format!(
+                "{side} hand: the annotation's finger pose is MANO PCA coefficients, which the \
+                 {} model has no basis for; {consequence}",
+                models.get(side).source
+            )
+        })
+        .collect()
+}
+
+/// Refines both hands of `hands` (both must be present) against `target`.
+///
+/// `assets` must be built from `models` (the render meshes and layouts). The finger pose of
+/// a hand whose annotation gives PCA coefficients that its model cannot interpret (a model
+/// without a learned pose PCA, [`has_learned_pose_pca`]) starts from the model's mean pose,
+/// and the report says so.
+///
+/// # Errors
+/// A missing hand, hands that cover no pixel of the image, a bad configuration, or a
+/// non-finite loss.
+#[allow(clippy::too_many_arguments)]
+pub fn refine_hands(
+    assets: &HandAssets,
+    hands: &TwoHandScene,
+    target: &RefineTarget,
+    appearance: &Appearance,
+    config: &RefineConfig,
+    device: &Device,
+    observer: &mut dyn RefineObserver,
+) -> Result<Refinement, BittError> {
+    config.validate()?;
+    let started = Instant::now();
+    let models = &assets.models;
+    let mut notes = Vec::new();
+    let mut start: Vec<HandParams> = Vec::new();
+    let mut pose_units = Vec::new();
+    for side in Side::BOTH {
+        let p = hands.hand(side).ok_or_else(|| {
+            BittError::Invalid(format!(
+                "the {side} hand is not given; refinement needs both"
+            ))
+        })?;
+        p.validate()
+            .map_err(|e| BittError::Invalid(format!("the {side} hand: {e}")))?;
+        let mut p = p.clone();
+        let uninformed = uninterpretable_pca(models, side, &p);
+        if uninformed {
+            p.pose = HandPose::Pca(vec![0.0; NUM_POSE]);
+        }
+        pose_units.push(if uninformed {
+            config.uninformed_pose_unit as f32
+        } else {
+            1.0
+        });
+        start.push(p);
+    }
+    notes.extend(pca_pose_notes(
+        models,
+        hands,
+        "its fingers start from the model's mean pose",
+    ));
+    hands.camera.validate()?;
+    if hands.camera.width != target.camera.width || hands.camera.height != target.camera.height {
+        return Err(BittError::Invalid(format!(
+            "the hands' camera is for a {}x{} image, the target is {}x{}",
+            hands.camera.width, hands.camera.height, target.camera.width, target.camera.height
+        )));
+    }
+    let [h, w] = target.size();
+    let hw = h * w;
+
+    let layer = HandLayer::new(models, device)?;
+    let nv = layer.num_vertices();
+    let (root0, pose0, betas0, trans0) = host_params(models, [&start[0], &start[1]]);
+    let f = |v: &[f64]| v.iter().map(|&x| x as f32).collect::<Vec<f32>>();
+    let root0 = float(f(&root0), [2, 6], device);
+    let pose0 = float(f(&pose0), [2, NUM_POSE], device);
+    let betas0 = float(f(&betas0), [2, 10], device);
+    let trans0 = float(f(&trans0), [2, 3], device);
+    let pose_unit = float(pose_units, [2, 1], device);
+
+    // Camera frame: v_cam = R v + t, rendered with identity extrinsics (as `ViewGeometry`).
+    let cam = target.camera;
+    let r = cam.rotation;
+    // `points [N, 3] @ R^T` gives rows `R p`; R^T row-major: R^T[i][j] = R[j][i].
+    let rt: Vec<f32> = (0..3)
+        .flat_map(|i| (0..3).map(move |j| r.col(i)[j] as f32))
+        .collect();
+    let r_t = float(rt, [3, 3], device);
+    let t_cam = float(
+        vec![
+            cam.translation.x as f32,
+            cam.translation.y as f32,
+            cam.translation.z as f32,
+        ],
+        [1, 3],
+        device,
+    );
+    let render_camera = Camera::Pinhole(PinholeCamera {
+        rotation: bitt_mesh::glam::DMat3::IDENTITY,
+        translation: DVec3::ZERO,
+        ..cam
+    });
+    let depth = DepthRange::default();
+    let topology = assets.scene.topology();
+
+    // Fixed targets on the device.
+    let mask_t = float(target.mask.clone(), [1, h, w], device);
+    let area = target.mask.iter().filter(|&&m| m > 0.5).count() as f64;
+    let photo_hand: Vec<f32> = (0..3 * hw)
+        .map(|i| target.image[i] * target.mask[i % hw])
+        .collect();
+    let photo_hand = float(photo_hand, [3, h, w], device);
+    let dt = distance_to_mask(&target.mask, [h, w]);
+    let dt_t = float(dt, [1, h, w], device);
+    let scale_px = (h.max(w) as f64) / 128.0;
+    let coverage_radius = config.coverage_radius * scale_px;
+    let mask_pixels: Vec<usize> = (0..hw).filter(|&p| target.mask[p] > 0.5).collect();
+
+    // Priors' constants.
+    let axes = float(flexion_axes(models), [2, 15, 3], device);
+    let bone_list = bones();
+    let child: Vec<i64> = bone_list.iter().map(|b| b.0 as i64).collect();
+    let parent: Vec<i64> = bone_list.iter().map(|b| b.1 as i64).collect();
+    let child = Tensor::<1, Int>::from_data(TensorData::new(child, [20]), device);
+    let parent = Tensor::<1, Int>::from_data(TensorData::new(parent, [20]), device);
+
+    let (k_tex, pca) = match appearance {
+        Appearance::Prior(p) => (p.basis.dims()[1], Some(p)),
+        Appearance::Fixed { .. } => (1, None),
+    };
+    let zeros =
+        |shape: [usize; 2]| Param::from_tensor(Tensor::<2>::zeros(shape, device).require_grad());
+    let mut vars = RefineVars {
+        root: zeros([2, 6]),
+        trans: zeros([2, 3]),
+        pose: zeros([2, NUM_POSE]),
+        betas: zeros([2, 10]),
+        texture: zeros([2, k_tex]),
+        light: zeros([1, 12]),
+    };
+    let settings = RenderSettings::default();
+    let gather = assets.gather(device);
+    let fit_appearance = config.fit_appearance && pca.is_some();
+
+    let mut stages = Vec::new();
+    let mut iou_before = f64::NAN;
+    let total_iterations = config.rigid_iterations + config.full_iterations;
+    let mut done = 0usize;
+    for (stage, iterations) in [
+        ("rigid", config.rigid_iterations),
+        ("all", config.full_iterations),
+    ] {
+        if iterations == 0 {
+            continue;
+        }
+        let stage_started = Instant::now();
+        let mut adam = Adam::new(OptimConfig::default());
+        let mut first = None;
+        let mut last = RefineTerms::default();
+        let mut iou = f64::NAN;
+        for it in 0..iterations {
+            let rigid = stage == "rigid";
+            let maybe = |t: Tensor<2>, frozen: bool| if frozen { t.detach() } else { t };
+            let params = HandLayerParams {
+                root_6d: root0.clone() + vars.root.val(),
+                trans: trans0.clone() + vars.trans.val() * config.translation_unit,
+                finger_pose: pose0.clone() + maybe(vars.pose.val(), rigid) * pose_unit.clone(),
+                betas: betas0.clone() + maybe(vars.betas.val(), rigid) * config.shape_unit,
+            };
+            let out = layer.forward(&params);
+            let world = out.vertices.clone().reshape([2 * nv, 3]);
+            let cam_pts = world.matmul(r_t.clone()) + t_cam.clone();
+            let per_hand = [
+                cam_pts.clone().narrow(0, 0, nv),
+                cam_pts.clone().narrow(0, nv, nv),
+            ];
+
+            // Render: photometric image (with its raster) or the raster alone.
+            let (image, raster, clip) = if let Some(pca) = pca.filter(|_| w_photo(config) > 0.0) {
+                let coeffs = if fit_appearance {
+                    vars.texture.val()
+                } else {
+                    vars.texture.val().detach()
+                };
+                let tex = pca.textures(coeffs);
+                let light_raw = if fit_appearance {
+                    vars.light.val()
+                } else {
+                    vars.light.val().detach()
+                };
+                let light = point_light(&LightParams::from_raw(light_raw));
+                let images = [
+                    gather.compact_to_image(
+                        tex.clone()
+                            .narrow(0, 0, 1)
+                            .reshape([3, assets.num_texels()]),
+                        [0.0; 3],
+                    ),
+                    gather.compact_to_image(
+                        tex.narrow(0, 1, 1).reshape([3, assets.num_texels()]),
+                        [0.0; 3],
+                    ),
+                ];
+                let r = render(
+                    &assets.scene,
+                    &per_hand,
+                    &images,
+                    &render_camera,
+                    &light,
+                    &settings,
+                )?;
+                (Some(r.image), r.raster, r.clip)
+            } else if let (Appearance::Fixed { textures, light }, true) =
+                (appearance, w_photo(config) > 0.0)
+            {
+                let images = [
+                    gather.compact_to_image(textures[0].clone(), [0.0; 3]),
+                    gather.compact_to_image(textures[1].clone(), [0.0; 3]),
+                ];
+                let light = light.to_light(device);
+                let r = render(
+                    &assets.scene,
+                    &per_hand,
+                    &images,
+                    &render_camera,
+                    &light,
+                    &settings,
+                )?;
+                (Some(r.image), r.raster, r.clip)
+            } else {
+                let clip = render_camera.clip_positions(cam_pts.clone(), depth)?;
+                let raster = rasterize(clip.clone(), topology, h, w)?;
+                (None, raster, clip)
+            };
+            if raster.num_covered() == 0 {
+                return Err(BittError::Invalid(format!(
+                    "the hands cover no pixel of the {w}x{h} image (they project outside it \
+                     or behind the camera{})",
+                    if done == 0 {
+                        ""
+                    } else {
+                        " after refining: it diverged"
+                    }
+                )));
+            }
+            let covered = raster.mask(device);
+            let covered_host = host(covered.clone());
+            iou = mask_iou(&covered_host, &target.mask);
+            if done == 0 {
+                iou_before = iou;
+            }
+
+            let sil = antialias(covered.reshape([1, h, w]), &raster, clip.clone(), topology)?;
+            let wts = &config.weights;
+            let silhouette = (sil - mask_t.clone()).square().sum() / area;
+
+            // Projected vertices (pixels) from clip space, as the rasterizer sees them.
+            let n = 2 * nv;
+            let cw = clip.clone().narrow(1, 3, 1);
+            let px = (clip.clone().narrow(1, 0, 1) / cw.clone() + 1.0) * (w as f64 / 2.0);
+            let py = (clip.clone().narrow(1, 1, 1) / cw + 1.0) * (h as f64 / 2.0);
+            let u = (px.clone() - 0.5) / ((w - 1) as f64);
+            let v = ((py.clone() - 0.5) / ((h - 1) as f64)).neg() + 1.0;
+            let dist = texture(dt_t.clone(), Tensor::cat(vec![u, v], 1))?;
+            let outside = dist.sum() / (n as f64);
+
+            // Uncovered mask pixels pull their nearest projected vertex.
+            let pxh = host(px.clone());
+            let pyh = host(py.clone());
+            let uncovered: Vec<usize> = mask_pixels
+                .iter()
+                .copied()
+                .filter(|&p| covered_host[p] < 0.5)
+                .collect();
+            let stride = uncovered
+                .len()
+                .div_ceil(config.coverage_samples.max(1))
+                .max(1);
+            let mut pulls: Vec<(i64, f32, f32)> = Vec::new();
+            for &p in uncovered.iter().step_by(stride) {
+                let (qx, qy) = ((p % w) as f32 + 0.5, (p / w) as f32 + 0.5);
+                let mut best = (f32::INFINITY, 0usize);
+                for i in 0..n {
+                    let d = (pxh[i] - qx).powi(2) + (pyh[i] - qy).powi(2);
+                    if d < best.0 {
+                        best = (d, i);
+                    }
+                }
+                if f64::from(best.0.sqrt()) <= coverage_radius {
+                    pulls.push((best.1 as i64, qx, qy));
+                }
+            }
+            let coverage = if pulls.is_empty() {
+                Tensor::<1>::zeros([1], device)
+            } else {
+                let k = pulls.len();
+                let idx = Tensor::<1, Int>::from_data(
+                    TensorData::new(pulls.iter().map(|p| p.0).collect::<Vec<_>>(), [k]),
+                    device,
+                );
+                let qx = float(pulls.iter().map(|p| p.1).collect(), [k, 1], device);
+                let qy = float(pulls.iter().map(|p| p.2).collect(), [k, 1], device);
+                let d2 = (px.clone().select(0, idx.clone()) - qx).square()
+                    + (py.clone().select(0, idx) - qy).square();
+                // Normalised by the mask area so that the term fades as coverage completes.
+                ((d2 + 1.0).sqrt() - 1.0).sum() / (mask_pixels.len() as f64 / stride as f64)
+            };
+
+            let photometric = match &image {
+                Some(img) => {
+                    let union = (mask_t.clone()
+                        + covered_host_tensor(&covered_host, [h, w], device))
+                    .clamp(0.0, 1.0);
+                    ((img.clone() - photo_hand.clone()).abs() * union).sum() / (3.0 * area)
+                }
+                None => Tensor::<1>::zeros([1], device),
+            };
+
+            // Priors.
+            let dpose = params.finger_pose.clone() - pose0.clone();
+            let pose_prior = dpose.square().mean();
+            let aa = params.finger_pose.clone().reshape([2, 15, 3]);
+            let along = (aa.clone() * axes.clone()).sum_dim(2); // [2, 15, 1]
+            let off = aa - axes.clone() * along.clone();
+            let off_len = (off.square().sum_dim(2) + 1e-12).sqrt();
+            let limits = ((along.clone().neg() + FLEXION_RANGE.0)
+                .clamp_min(0.0)
+                .square()
+                + (along - FLEXION_RANGE.1).clamp_min(0.0).square()
+                + (off_len - OFF_AXIS_LIMIT).clamp_min(0.0).square())
+            .sum();
+            let shape = params.betas.clone().square().mean();
+            let penetration = {
+                let j = out.joints.clone(); // [2, 21, 3]
+                let points = |hand: usize| {
+                    let jh = j.clone().narrow(0, hand, 1).reshape([21, 3]);
+                    let mid = (jh.clone().select(0, child.clone())
+                        + jh.clone().select(0, parent.clone()))
+                        * 0.5;
+                    Tensor::cat(vec![jh, mid], 0) // [41, 3]
+                };
+                let (a, b) = (points(0), points(1));
+                let d2 = a.clone().square().sum_dim(1) + b.clone().square().sum_dim(1).transpose()
+                    - a.matmul(b.transpose()) * 2.0;
+                let d = (d2.clamp_min(0.0) + 1e-12).sqrt();
+                let rad = config.joint_radius;
+                ((d.neg() + 2.0 * rad).clamp_min(0.0) / rad).square().sum()
+            };
+
+            let parts = [
+                (wts.silhouette, silhouette),
+                (wts.outside, outside),
+                (wts.coverage, coverage),
+                (w_photo(config), photometric),
+                (wts.pose, pose_prior),
+                (wts.limits, limits),
+                (wts.shape, shape),
+                (wts.penetration, penetration),
+            ];
+            let mut values = [0.0f64; 8];
+            let mut loss: Option<Tensor<1>> = None;
+            for (i, (weight, term)) in parts.into_iter().enumerate() {
+                if weight <= 0.0 {
+                    continue;
+                }
+                let t = term.reshape([1]) * weight;
+                values[i] = scalar(t.clone().detach());
+                loss = Some(match loss {
+                    Some(l) => l + t,
+                    None => t,
+                });
+            }
+            let terms = RefineTerms {
+                total: values.iter().sum(),
+                silhouette: values[0],
+                outside: values[1],
+                coverage: values[2],
+                photometric: values[3],
+                pose: values[4],
+                limits: values[5],
+                shape: values[6],
+                penetration: values[7],
+            };
+            if !terms.total.is_finite() {
+                return Err(BittError::NonFinite(format!(
+                    "refinement loss at {stage} iteration {}: {terms:?}",
+                    it + 1
+                )));
+            }
+            first.get_or_insert(terms);
+            last = terms;
+            done += 1;
+            observer.iteration(&RefineProgress {
+                stage,
+                iteration: done,
+                iterations: total_iterations,
+                terms,
+                iou,
+            });
+            let Some(loss) = loss else { break };
+            let grads = loss.backward();
+            let progress = it as f64 / (iterations.max(2) - 1) as f64;
+            let decay = config.final_lr_fraction
+                + (1.0 - config.final_lr_fraction)
+                    * 0.5
+                    * (1.0 + (std::f64::consts::PI * progress).cos());
+            vars = adam.step(vars, &grads, config.learning_rate * decay);
+        }
+        stages.push(StageReport {
+            stage: stage.to_string(),
+            iterations,
+            first: first.unwrap_or_default(),
+            last,
+            iou,
+            seconds: stage_started.elapsed().as_secs_f64(),
+        });
+    }
+    let params = HandLayerParams {
+        root_6d: root0 + vars.root.val(),
+        trans: trans0 + vars.trans.val() * config.translation_unit,
+        finger_pose: pose0 + vars.pose.val() * pose_unit,
+        betas: betas0 + vars.betas.val() * config.shape_unit,
+    };
+    let [left, right] = params.to_host()?;
+    let refined = TwoHandScene {
+        left: Some(left),
+        right: Some(right),
+        camera: hands.camera,
+        frame: hands.frame.clone(),
+    };
+    let iou_after = silhouette_iou(&assets.models, &refined, &assets.scene, &target.mask)?;
+    if stages.is_empty() {
+        iou_before = iou_after;
+    }
+    Ok(Refinement {
+        hands: refined,
+        initial: hands.clone(),
+        report: RefineReport {
+            iou_before,
+            iou_after,
+            stages,
+            seconds: started.elapsed().as_secs_f64(),
+            image_size: [h, w],
+            notes,
+            config: config.clone(),
+        },
+    })
+}
+
+/// A refinement to run before training: its configuration and where progress goes.
+pub struct MeshRefine<'a> {
+    /// How to refine.
+    pub config: &'a RefineConfig,
+    /// Progress.
+    pub observer: &'a mut dyn RefineObserver,
+}
+
+impl std::fmt::Debug for MeshRefine<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("MeshRefine")
+            .field("config", self.config)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Refines `hands` against one view's image (`[3, H, W]` at the hands' camera size) with the
+/// texture prior `pca` fitted jointly (photometric term). `device` must be an autodiff device.
+///
+/// # Errors
+/// As [`RefineTarget::new`] and [`refine_hands`].
+#[allow(clippy::too_many_arguments)]
+pub fn refine_view(
+    assets: &HandAssets,
+    pca: &bitt_texture::TexturePca,
+    hands: &TwoHandScene,
+    image: &[f32],
+    mask: Option<Vec<f32>>,
+    config: &RefineConfig,
+    device: &Device,
+    observer: &mut dyn RefineObserver,
+    what: &str,
+) -> Result<Refinement, BittError> {
+    let target = RefineTarget::new(image.to_vec(), mask, hands.camera, what)?;
+    let appearance = Appearance::Prior(pca.to_device(device));
+    refine_hands(
+        assets,
+        hands,
+        &target,
+        &appearance,
+        config,
+        device,
+        observer,
+    )
+}
+
+/// Refines a synthetic scene's given meshes against its training image at `image_size` (the
+/// preset's; the image is resized as the trainer resizes it). The result's camera is the
+/// scene's (`scene.given.camera`), so it can replace `scene.given`.
+///
+/// # Errors
+/// As [`refine_view`].
+#[allow(clippy::too_many_arguments)]
+pub fn refine_synthetic(
+    scene: &bitt_synth::SynthScene,
+    assets: &HandAssets,
+    pca: &bitt_texture::TexturePca,
+    image_size: usize,
+    config: &RefineConfig,
+    device: &Device,
+    observer: &mut dyn RefineObserver,
+) -> Result<Refinement, BittError> {
+    let input = crate::input::ImageInput {
+        image: scene.train.image.clone(),
+        mask: None,
+        camera: scene.given.camera,
+    };
+    let input = if input.size() == [image_size, image_size] {
+        input
+    } else {
+        input.fit_square(None, image_size)?
+    };
+    let given = TwoHandScene {
+        camera: input.camera,
+        ..scene.given.clone()
+    };
+    let [h, w] = input.size();
+    let mask = threshold_mask(&input.image, h * w, SYNTHETIC_MASK_THRESHOLD);
+    let mut done = refine_view(
+        assets,
+        pca,
+        &given,
+        &input.image,
+        Some(mask),
+        config,
+        device,
+        observer,
+        "the scene's training image",
+    )?;
+    done.hands.camera = scene.given.camera;
+    done.initial.camera = scene.given.camera;
+    Ok(done)
+}
+
+/// Per-hand visible masks `[H, W]` of `hands` in their camera, as a label image: 0 none,
+/// 1 left, 2 right (host rasterizer, mutual occlusion resolved).
+fn hand_labels(
+    models: &HandPair,
+    hands: &TwoHandScene,
+    scene: &bitt_render::scene::Scene,
+) -> Result<Vec<u8>, BittError> {
+    let device = Device::flex();
+    let posed = hands.pose_in_camera(models)?;
+    let mut pts = Vec::new();
+    for side in Side::BOTH {
+        let p = posed
+            .get(side)
+            .ok_or_else(|| BittError::Invalid(format!("the {side} hand is missing")))?;
+        pts.extend_from_slice(&p.vertices);
+    }
+    let camera = Camera::Pinhole(PinholeCamera {
+        rotation: bitt_mesh::glam::DMat3::IDENTITY,
+        translation: DVec3::ZERO,
+        ..hands.camera
+    });
+    let all = crate::assets::vertex_tensor(&pts, &device);
+    let clip = camera.clip_positions(all, DepthRange::default())?;
+    let raster = rasterize(clip, scene.topology(), camera.height(), camera.width())?;
+    let left_faces = scene.face_range(0);
+    Ok(raster
+        .fragments
+        .face
+        .iter()
+        .map(|&f| {
+            if f < 0 {
+                0
+            } else if left_faces.contains(&(f as u32)) {
+                1
+            } else {
+                2
+            }
+        })
+        .collect())
+}
+
+/// The photo `[3, H, W]` enlarged `scale` times (nearest) with the outlines of each hand's
+/// visible region before (red) and after (green) refinement drawn over it; returns the image
+/// and its `[H, W]`. Both scenes must have the photo's camera.
+///
+/// # Errors
+/// When a hand cannot be posed or the image does not match the camera.
+pub fn overlay(
+    image: &[f32],
+    models: &HandPair,
+    scene: &bitt_render::scene::Scene,
+    before: &TwoHandScene,
+    after: &TwoHandScene,
+    scale: usize,
+) -> Result<(Vec<f32>, [usize; 2]), BittError> {
+    let (w, h) = (before.camera.width as usize, before.camera.height as usize);
+    if image.len() != 3 * w * h {
+        return Err(BittError::Invalid(format!(
+            "overlay: the image has {} values, the camera is {w}x{h}",
+            image.len()
+        )));
+    }
+    let s = scale.max(1);
+    let (bw, bh) = (w * s, h * s);
+    let mut out = vec![0.0f32; 3 * bw * bh];
+    for c in 0..3 {
+        for y in 0..bh {
+            for x in 0..bw {
+                out[c * bw * bh + y * bw + x] = image[c * w * h + (y / s) * w + x / s];
+            }
+        }
+    }
+    let big = |t: &TwoHandScene| {
+        let mut t = t.clone();
+        let k = &mut t.camera.intrinsics;
+        let m = bitt_mesh::glam::DMat3::from_diagonal(DVec3::new(s as f64, s as f64, 1.0));
+        *k = m * *k;
+        t.camera.width = bw as u32;
+        t.camera.height = bh as u32;
+        t
+    };
+    for (hands, colour) in [(before, [1.0, 0.15, 0.1]), (after, [0.1, 1.0, 0.2])] {
+        let labels = hand_labels(models, &big(hands), scene)?;
+        for y in 0..bh {
+            for x in 0..bw {
+                let l = labels[y * bw + x];
+                if l == 0 {
+                    continue;
+                }
+                let edge = [(0i64, 1i64), (0, -1), (1, 0), (-1, 0)]
+                    .iter()
+                    .any(|(dx, dy)| {
+                        let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                        nx < 0
+                            || ny < 0
+                            || nx >= bw as i64
+                            || ny >= bh as i64
+                            || labels[ny as usize * bw + nx as usize] != l
+                    });
+                if edge {
+                    for (c, v) in colour.iter().enumerate() {
+                        out[c * bw * bh + y * bw + x] = *v;
+                    }
+                }
+            }
+        }
+    }
+    Ok((out, [bh, bw]))
+}
+
+fn w_photo(config: &RefineConfig) -> f64 {
+    config.weights.photometric
+}
+
+fn covered_host_tensor(covered: &[f32], [h, w]: [usize; 2], device: &Device) -> Tensor<3> {
+    float(covered.to_vec(), [1, h, w], device)
+}
+
+/// The two-hand silhouette `[H, W]` (1/0) of `hands` in their camera (host rasterizer).
+///
+/// # Errors
+/// When a hand cannot be posed.
+pub fn silhouette(
+    models: &HandPair,
+    hands: &TwoHandScene,
+    scene: &bitt_render::scene::Scene,
+) -> Result<Vec<f32>, BittError> {
+    Ok(hand_labels(models, hands, scene)?
+        .into_iter()
+        .map(|l| if l > 0 { 1.0 } else { 0.0 })
+        .collect())
+}
+
+/// IoU of the silhouette of `hands` against `mask`.
+///
+/// # Errors
+/// When a hand cannot be posed.
+pub fn silhouette_iou(
+    models: &HandPair,
+    hands: &TwoHandScene,
+    scene: &bitt_render::scene::Scene,
+    mask: &[f32],
+) -> Result<f64, BittError> {
+    Ok(mask_iou(&silhouette(models, hands, scene)?, mask))
+}
+
+/// Mean and largest distance (pixels) between the projections of corresponding vertices of
+/// two scenes of the same hands seen by `a`'s camera.
+///
+/// # Errors
+/// When a hand cannot be posed.
+pub fn vertex_error_px(
+    models: &HandPair,
+    a: &TwoHandScene,
+    b: &TwoHandScene,
+) -> Result<(f64, f64), BittError> {
+    let pa = a.pose_in_camera(models)?;
+    let pb = b.pose_in_camera(models)?;
+    let cam = &a.camera;
+    let (mut sum, mut max, mut n) = (0.0f64, 0.0f64, 0usize);
+    for side in Side::BOTH {
+        if let (Some(x), Some(y)) = (pa.get(side), pb.get(side)) {
+            for (p, q) in x.vertices.iter().zip(&y.vertices) {
+                if let (Some(u), Some(v)) = (cam.camera_to_pixel(*p), cam.camera_to_pixel(*q)) {
+                    let d = u.distance(v);
+                    sum += d;
+                    max = max.max(d);
+                    n += 1;
+                }
+            }
+        }
+    }
+    Ok((sum / n.max(1) as f64, max))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn distance_transform_is_exact_on_small_masks() {
+        let (h, w) = (7, 9);
+        let mut mask = vec![0.0; h * w];
+        mask[2 * w + 3] = 1.0;
+        mask[5 * w + 7] = 1.0;
+        let dt = distance_to_mask(&mask, [h, w]);
+        for y in 0..h {
+            for x in 0..w {
+                let d1 = (((x as f64 - 3.0).powi(2)) + (y as f64 - 2.0).powi(2)).sqrt();
+                let d2 = (((x as f64 - 7.0).powi(2)) + (y as f64 - 5.0).powi(2)).sqrt();
+                assert!(
+                    (f64::from(dt[y * w + x]) - d1.min(d2)).abs() < 1e-5,
+                    "({x}, {y})"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn bad_targets_are_refused() {
+        let cam = PinholeCamera::looking_down_z(100.0, 8, 6);
+        let img = vec![0.5f32; 3 * 48];
+        assert!(RefineTarget::new(img.clone(), Some(vec![1.0; 47]), cam, "t").is_err());
+        let e = RefineTarget::new(img.clone(), Some(vec![0.0; 48]), cam, "t").unwrap_err();
+        assert!(e.to_string().contains("empty"), "{e}");
+        let mut nan = img.clone();
+        nan[3] = f32::NAN;
+        assert!(RefineTarget::new(nan, None, cam, "t").is_err());
+        assert!(RefineTarget::new(vec![0.0; 3 * 48], None, cam, "t").is_err());
+        assert!(RefineTarget::new(img, None, cam, "t").is_ok());
+    }
+}
