@@ -7,7 +7,8 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use bitt::refine::{
-    RefineConfig, RefineObserver, RefineProgress, refine_photo, refine_scene, write_refine_outputs,
+    RefineConfig, RefineObserver, RefineProgress, check_refine_out, refine_photo, refine_scene,
+    write_refine_outputs,
 };
 use bitt_nets::Preset;
 use bitt_synth::SynthScene;
@@ -152,6 +153,7 @@ pub fn run(args: &RefineHandsArgs) -> Result<()> {
         args.iterations,
     )?;
     let cache = Some(args.cache.as_path());
+    check_refine_out(&args.out)?;
     let mut bar = RefineBar::new();
     if let Some(dir) = &args.scene {
         if args.model_dir.is_some() || args.mask.is_some() {
@@ -228,5 +230,116 @@ pub fn run(args: &RefineHandsArgs) -> Result<()> {
 fn print_notes(notes: &[String]) {
     for n in notes {
         println!("note: {n}");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bitt_tests::real_fixture::{AnnotationOptions, scratch, write_annotation, write_image};
+    use clap::Parser;
+
+    #[derive(Debug, Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: RefineHandsArgs,
+    }
+
+    fn args(extra: &[&str]) -> RefineHandsArgs {
+        let mut all = vec![
+            "bitt",
+            "--preset",
+            "tiny",
+            "--rigid-iterations",
+            "3",
+            "--iterations",
+            "5",
+        ];
+        all.extend_from_slice(extra);
+        Cli::try_parse_from(all).unwrap().args
+    }
+
+    fn s(p: &Path) -> &str {
+        p.to_str().unwrap()
+    }
+
+    /// A photo with its annotation refines and writes the three files; `hands.json` is
+    /// accepted as `--annotation` again. A mask of the wrong size, an empty mask and an
+    /// annotation with NaN are clear errors that leave no output folder behind.
+    #[test]
+    fn photo_refines_and_bad_inputs_leave_nothing() {
+        let dir = scratch("cli-refine");
+        let (img, pkl, nan) = (dir.join("01.png"), dir.join("01.pkl"), dir.join("nan.pkl"));
+        write_image(&img, 256, 256, None);
+        write_annotation(&pkl, AnnotationOptions::default());
+        write_annotation(
+            &nan,
+            AnnotationOptions {
+                nan: true,
+                ..AnnotationOptions::default()
+            },
+        );
+        let cache = dir.join("cache");
+        let out = dir.join("out");
+        let common = |annotation: &Path, out: &Path| {
+            vec![
+                "--image".to_string(),
+                s(&img).into(),
+                "--annotation".into(),
+                s(annotation).into(),
+                "--size".into(),
+                "64".into(),
+                "--cache".into(),
+                s(&cache).into(),
+                "--out".into(),
+                s(out).into(),
+            ]
+        };
+        let with = |extra: Vec<String>| args(&extra.iter().map(String::as_str).collect::<Vec<_>>());
+        run(&with(common(&pkl, &out))).unwrap();
+        for f in ["hands.json", "refine.json", "overlay.png"] {
+            assert!(out.join(f).is_file(), "{f} missing");
+        }
+        let record: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("refine.json")).unwrap())
+                .unwrap();
+        assert_eq!(record["report"]["stages"].as_array().unwrap().len(), 2);
+        assert!(record["silhouette_iou_vs_mask"]["after"].as_f64().unwrap() > 0.0);
+        // The written hands are an annotation for every command.
+        let again = dir.join("again");
+        run(&with(common(&out.join("hands.json"), &again))).unwrap();
+        assert!(again.join("hands.json").is_file());
+
+        let bad_out = dir.join("bad");
+        let small = dir.join("small.png");
+        write_image(&small, 100, 80, None);
+        let mut a = common(&pkl, &bad_out);
+        a.extend(["--mask".into(), s(&small).into()]);
+        let e = format!("{:#}", run(&with(a)).unwrap_err());
+        assert!(e.contains("small.png") && e.contains("100x80"), "{e}");
+        let empty = dir.join("empty.png");
+        write_image(&empty, 256, 256, Some(&|_, _| [0, 0, 0]));
+        let mut a = common(&pkl, &bad_out);
+        a.extend(["--mask".into(), s(&empty).into()]);
+        let e = format!("{:#}", run(&with(a)).unwrap_err());
+        assert!(e.contains("empty"), "{e}");
+        let e = format!("{:#}", run(&with(common(&nan, &bad_out))).unwrap_err());
+        assert!(e.contains("nan.pkl") && e.contains("NaN"), "{e}");
+        assert!(
+            !bad_out.exists(),
+            "a failed refinement wrote {}",
+            bad_out.display()
+        );
+        // A folder that is not ours is refused.
+        let foreign = dir.join("foreign");
+        std::fs::create_dir_all(&foreign).unwrap();
+        std::fs::write(foreign.join("notes.txt"), "mine").unwrap();
+        let e = format!("{:#}", run(&with(common(&pkl, &foreign))).unwrap_err());
+        assert!(e.contains("not a refine-hands output"), "{e}");
+        assert_eq!(
+            std::fs::read_to_string(foreign.join("notes.txt")).unwrap(),
+            "mine"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -859,6 +859,52 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
     }
 
+    /// `--refine-mesh` refines the real pair's meshes before training: the run folder holds
+    /// `refine.json` and `overlay.png`, `metrics.json` and the report carry the refinement,
+    /// and the recorded hands (what `--resume` trains on) are the refined ones.
+    #[test]
+    fn refine_mesh_refines_before_training() {
+        let dir = scratch("cli-refine-mesh");
+        let (img, pkl) = (dir.join("01.jpg"), dir.join("01.pkl"));
+        write_image(&img, 256, 256, None);
+        write_annotation(&pkl, AnnotationOptions::default());
+        let cfg = dir.join("refine.json");
+        std::fs::write(&cfg, r#"{"rigid_iterations": 2, "full_iterations": 3}"#).unwrap();
+        let (out, cache) = (dir.join("run"), dir.join("cache"));
+        let all = [
+            "--image",
+            s(&img),
+            "--annotation",
+            s(&pkl),
+            "--cache",
+            s(&cache),
+            "--out",
+            s(&out),
+            "--iterations",
+            "2",
+            "--refine-mesh",
+            "--refine-config",
+            s(&cfg),
+        ];
+        run(&args(&all)).unwrap();
+        assert!(out.join("overlay.png").is_file());
+        let read = |f: &str| -> serde_json::Value {
+            serde_json::from_str(&std::fs::read_to_string(out.join(f)).unwrap()).unwrap()
+        };
+        let refine = read("refine.json");
+        assert_eq!(refine["report"]["config"]["full_iterations"], 3);
+        assert_eq!(read("metrics.json")["refine"], refine);
+        let report = std::fs::read_to_string(out.join("report.html")).unwrap();
+        assert!(report.contains("Mesh refinement"));
+        let input = read("input.json");
+        let pose = &input["train"]["hands"]["left"]["pose"];
+        assert_eq!(
+            pose["kind"], "axis_angle",
+            "the run trains on the refined hands"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
     /// Bad real inputs fail before the run folder is created.
     #[test]
     fn bad_real_inputs_write_nothing() {

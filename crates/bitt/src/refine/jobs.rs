@@ -296,6 +296,31 @@ pub fn refine_photo(
     })
 }
 
+/// Refuses an output folder that exists, is not empty and holds no `refine.json` (not an
+/// earlier `refine-hands` output): nothing of the user's is overwritten.
+///
+/// # Errors
+/// [`BittError::Invalid`] naming the folder.
+pub fn check_refine_out(out: &Path) -> Result<(), BittError> {
+    let files = crate::run::files::REFINE;
+    if out.is_dir() {
+        let mut entries = std::fs::read_dir(out).map_err(|e| BittError::io(out, e))?;
+        if entries.next().is_some() && !out.join(files).is_file() {
+            return Err(BittError::Invalid(format!(
+                "{}: the folder exists and is not a refine-hands output (no {files}); choose \
+                 another --out",
+                out.display()
+            )));
+        }
+    } else if out.exists() {
+        return Err(BittError::Invalid(format!(
+            "{}: exists and is not a folder",
+            out.display()
+        )));
+    }
+    Ok(())
+}
+
 /// Writes `hands.json`, `refine.json` and `overlay.png` into `out` (created if missing). A
 /// folder that exists, is not empty and holds no `refine.json` is not ours and is refused.
 ///
@@ -308,17 +333,7 @@ pub fn write_refine_outputs(
     record: &serde_json::Value,
     overlay: &(Vec<f32>, [usize; 2]),
 ) -> Result<(), BittError> {
-    let files = crate::run::files::REFINE;
-    if out.is_dir() {
-        let mut entries = std::fs::read_dir(out).map_err(|e| BittError::io(out, e))?;
-        if entries.next().is_some() && !out.join(files).is_file() {
-            return Err(BittError::Invalid(format!(
-                "{}: the folder exists and is not a refine-hands output (no {files}); choose \
-                 another --out",
-                out.display()
-            )));
-        }
-    }
+    check_refine_out(out)?;
     std::fs::create_dir_all(out).map_err(|e| BittError::io(out, e))?;
     let text = bitt_mesh::annotation::hands_json(hands, models)?;
     bitt_mesh::export::write_atomically(&out.join(HANDS_JSON), text.as_bytes())?;

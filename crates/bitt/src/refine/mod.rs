@@ -44,8 +44,8 @@ use crate::optim::Adam;
 use crate::pipeline::point_light;
 
 pub use jobs::{
-    HANDS_JSON, PhotoRefinement, SceneRefinement, read_mask, refine_photo, refine_scene,
-    write_refine_outputs,
+    HANDS_JSON, PhotoRefinement, SceneRefinement, check_refine_out, read_mask, refine_photo,
+    refine_scene, write_refine_outputs,
 };
 
 /// Weights of the refinement loss terms.
@@ -60,8 +60,12 @@ pub struct RefineWeights {
     pub coverage: f64,
     /// `|render - I * mask|` per covered-or-mask pixel and channel.
     pub photometric: f64,
-    /// Squared finger-pose change from the start (radians^2, mean over values).
+    /// Squared finger-pose change from the start (radians^2, mean over values). It also
+    /// holds the fingers the photo cannot see (hidden behind the other hand) where they were.
     pub pose: f64,
+    /// Multiplies `pose` for a hand whose finger pose starts uninformed (the model's mean
+    /// pose): that start is only a relaxed hand, not an estimate.
+    pub uninformed_pose: f64,
     /// Joint-angle limit violations (radians^2, summed).
     pub limits: f64,
     /// Squared betas (mean).
@@ -77,7 +81,8 @@ impl Default for RefineWeights {
             outside: 0.05,
             coverage: 0.2,
             photometric: 1.0,
-            pose: 0.5,
+            pose: 5.0,
+            uninformed_pose: 0.1,
             limits: 1.0,
             shape: 0.01,
             penetration: 0.1,
@@ -171,6 +176,7 @@ impl RefineConfig {
             w.coverage,
             w.photometric,
             w.pose,
+            w.uninformed_pose,
             w.limits,
             w.shape,
             w.penetration,
@@ -577,6 +583,7 @@ pub fn refine_hands(
     let mut notes = Vec::new();
     let mut start: Vec<HandParams> = Vec::new();
     let mut pose_units = Vec::new();
+    let mut prior_scale = Vec::new();
     for side in Side::BOTH {
         let p = hands.hand(side).ok_or_else(|| {
             BittError::Invalid(format!(
@@ -592,6 +599,11 @@ pub fn refine_hands(
         }
         pose_units.push(if uninformed {
             config.uninformed_pose_unit as f32
+        } else {
+            1.0
+        });
+        prior_scale.push(if uninformed {
+            config.weights.uninformed_pose as f32
         } else {
             1.0
         });
@@ -621,6 +633,7 @@ pub fn refine_hands(
     let betas0 = float(f(&betas0), [2, 10], device);
     let trans0 = float(f(&trans0), [2, 3], device);
     let pose_unit = float(pose_units, [2, 1], device);
+    let prior_scale = float(prior_scale, [2, 1], device);
 
     // Camera frame: v_cam = R v + t, rendered with identity extrinsics (as `ViewGeometry`).
     let cam = target.camera;
@@ -862,7 +875,7 @@ pub fn refine_hands(
 
             // Priors.
             let dpose = params.finger_pose.clone() - pose0.clone();
-            let pose_prior = dpose.square().mean();
+            let pose_prior = (dpose.square() * prior_scale.clone()).mean();
             let aa = params.finger_pose.clone().reshape([2, 15, 3]);
             let along = (aa.clone() * axes.clone()).sum_dim(2); // [2, 15, 1]
             let off = aa - axes.clone() * along.clone();
