@@ -111,7 +111,8 @@ impl RefineObserver for RefineBar {
             if p.iteration == p.iterations {
                 eprintln!();
             }
-        } else if p.iteration.is_multiple_of(20) || p.iteration == 1 || p.iteration == p.iterations {
+        } else if p.iteration.is_multiple_of(20) || p.iteration == 1 || p.iteration == p.iterations
+        {
             eprintln!("{line}");
         }
         let _ = std::io::stderr().flush();

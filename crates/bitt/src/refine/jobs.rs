@@ -9,8 +9,9 @@ use bitt_synth::SynthScene;
 use burn::tensor::Device;
 
 use super::{
-    MASK_THRESHOLD, RefineConfig, RefineObserver, Refinement, overlay, refine_synthetic,
-    refine_view, silhouette, threshold_mask, vertex_error_px,
+    MASK_THRESHOLD, RefineConfig, RefineObserver, Refinement, SPECK_FRACTION,
+    drop_small_components, overlay, refine_synthetic, refine_view, silhouette, threshold_mask,
+    vertex_error_px,
 };
 use crate::BittError;
 use crate::assets::HandAssets;
@@ -249,12 +250,18 @@ pub fn refine_photo(
     }
     let models = load_models(hands, prior)?;
     let b = hands_in_image(&scene, &models, image)?;
+    // The fit sees the threshold mask without its specks (point lights); it is scored
+    // against the mask as the rule gives it.
+    let fit_mask = match mask {
+        Some(_) => full_mask.clone(),
+        None => drop_small_components(&full_mask, [h, w], SPECK_FRACTION),
+    };
     let view = ImageInput {
         image: pixels.clone(),
-        mask: Some(full_mask.clone()),
+        mask: Some(fit_mask.clone()),
         camera: scene.camera,
     }
-    .fit_square(Some(fit_box(b, &full_mask, [h, w])), size)?;
+    .fit_square(Some(fit_box(b, &fit_mask, [h, w])), size)?;
     let mut train = train.clone();
     let assets = HandAssets::new(models, train.texture.resolution)?;
     let pca = texture_model(&mut train, prior, &assets, cache, &device.clone().inner())?;

@@ -211,6 +211,10 @@ pub const MASK_THRESHOLD: f32 = 0.15;
 /// (dark skin falls below it) and 0.943 / 0.993 / 0.970 / 0.960 at 0.05 (noise rises above).
 pub const SYNTHETIC_MASK_THRESHOLD: f32 = 0.08;
 
+/// Threshold-mask components below this fraction of the largest are specks (the demo frames'
+/// point lights), not hands.
+pub const SPECK_FRACTION: f64 = 0.05;
+
 /// `mean_rgb > threshold` of an image `[3, H, W]`, as `[H, W]` 1/0.
 pub fn threshold_mask(image: &[f32], hw: usize, threshold: f32) -> Vec<f32> {
     (0..hw)
@@ -221,9 +225,59 @@ pub fn threshold_mask(image: &[f32], hw: usize, threshold: f32) -> Vec<f32> {
         .collect()
 }
 
+/// `mask` (`[H, W]`, > 0.5 inside) without its small specks: 4-connected components smaller
+/// than `min_fraction` of the largest one are dropped (the demo frames' point lights pass the
+/// threshold rule as isolated blobs, and would pull fingertips towards them).
+pub fn drop_small_components(mask: &[f32], [h, w]: [usize; 2], min_fraction: f64) -> Vec<f32> {
+    let mut label = vec![u32::MAX; h * w];
+    let mut sizes: Vec<usize> = Vec::new();
+    let mut stack = Vec::new();
+    for start in 0..h * w {
+        if mask[start] <= 0.5 || label[start] != u32::MAX {
+            continue;
+        }
+        let id = sizes.len() as u32;
+        let mut size = 0usize;
+        label[start] = id;
+        stack.push(start);
+        while let Some(p) = stack.pop() {
+            size += 1;
+            let (x, y) = (p % w, p / w);
+            let mut visit = |q: usize| {
+                if mask[q] > 0.5 && label[q] == u32::MAX {
+                    label[q] = id;
+                    stack.push(q);
+                }
+            };
+            if x > 0 {
+                visit(p - 1);
+            }
+            if x + 1 < w {
+                visit(p + 1);
+            }
+            if y > 0 {
+                visit(p - w);
+            }
+            if y + 1 < h {
+                visit(p + w);
+            }
+        }
+        sizes.push(size);
+    }
+    let largest = sizes.iter().copied().max().unwrap_or(0) as f64;
+    label
+        .iter()
+        .map(|&l| {
+            let keep = l != u32::MAX && sizes[l as usize] as f64 >= min_fraction * largest;
+            if keep { 1.0 } else { 0.0 }
+        })
+        .collect()
+}
+
 impl RefineTarget {
     /// A target from an image and an optional mask (`[H, W]`, values > 0.5 are hand); without
-    /// a mask, [`threshold_mask`] at [`MASK_THRESHOLD`].
+    /// a mask, [`threshold_mask`] at [`MASK_THRESHOLD`] without its specks
+    /// ([`drop_small_components`] at [`SPECK_FRACTION`]).
     ///
     /// # Errors
     /// Wrong sizes, non-finite values, or an empty mask. `what` names the inputs in messages.
@@ -259,7 +313,11 @@ impl RefineTarget {
                     .map(|x| if x > 0.5 { 1.0 } else { 0.0 })
                     .collect()
             }
-            None => threshold_mask(&image, w * h, MASK_THRESHOLD),
+            None => drop_small_components(
+                &threshold_mask(&image, w * h, MASK_THRESHOLD),
+                [h, w],
+                SPECK_FRACTION,
+            ),
         };
         let area = mask.iter().filter(|&&m| m > 0.5).count();
         if area == 0 {
@@ -681,9 +739,9 @@ pub fn refine_hands(
     let child = Tensor::<1, Int>::from_data(TensorData::new(child, [20]), device);
     let parent = Tensor::<1, Int>::from_data(TensorData::new(parent, [20]), device);
 
-    let (k_tex, pca) = match appearance {
-        Appearance::Prior(p) => (p.basis.dims()[1], Some(p)),
-        Appearance::Fixed { .. } => (1, None),
+    let k_tex = match appearance {
+        Appearance::Prior(p) => p.basis.dims()[1],
+        Appearance::Fixed { .. } => 1,
     };
     let zeros =
         |shape: [usize; 2]| Param::from_tensor(Tensor::<2>::zeros(shape, device).require_grad());
@@ -697,7 +755,7 @@ pub fn refine_hands(
     };
     let settings = RenderSettings::default();
     let gather = assets.gather(device);
-    let fit_appearance = config.fit_appearance && pca.is_some();
+    let fit_appearance = config.fit_appearance;
 
     let mut stages = Vec::new();
     let mut iou_before = f64::NAN;
@@ -733,61 +791,42 @@ pub fn refine_hands(
             ];
 
             // Render: photometric image (with its raster) or the raster alone.
-            let (image, raster, clip) = if let Some(pca) = pca.filter(|_| w_photo(config) > 0.0) {
-                let coeffs = if fit_appearance {
-                    vars.texture.val()
-                } else {
-                    vars.texture.val().detach()
-                };
-                let tex = pca.textures(coeffs);
-                let light_raw = if fit_appearance {
-                    vars.light.val()
-                } else {
-                    vars.light.val().detach()
-                };
-                let light = point_light(&LightParams::from_raw(light_raw));
-                let images = [
-                    gather.compact_to_image(
-                        tex.clone()
-                            .narrow(0, 0, 1)
-                            .reshape([3, assets.num_texels()]),
-                        [0.0; 3],
-                    ),
-                    gather.compact_to_image(
-                        tex.narrow(0, 1, 1).reshape([3, assets.num_texels()]),
-                        [0.0; 3],
-                    ),
-                ];
-                let r = render(
-                    &assets.scene,
-                    &per_hand,
-                    &images,
-                    &render_camera,
-                    &light,
-                    &settings,
-                )?;
-                (Some(r.image), r.raster, r.clip)
-            } else if let (Appearance::Fixed { textures, light }, true) =
-                (appearance, w_photo(config) > 0.0)
-            {
-                let images = [
-                    gather.compact_to_image(textures[0].clone(), [0.0; 3]),
-                    gather.compact_to_image(textures[1].clone(), [0.0; 3]),
-                ];
-                let light = light.to_light(device);
-                let r = render(
-                    &assets.scene,
-                    &per_hand,
-                    &images,
-                    &render_camera,
-                    &light,
-                    &settings,
-                )?;
-                (Some(r.image), r.raster, r.clip)
-            } else {
-                let clip = render_camera.clip_positions(cam_pts.clone(), depth)?;
-                let raster = rasterize(clip.clone(), topology, h, w)?;
-                (None, raster, clip)
+            let shading = match appearance {
+                _ if w_photo(config) <= 0.0 => None,
+                Appearance::Prior(pca) => {
+                    let fit = |t: Tensor<2>| if fit_appearance { t } else { t.detach() };
+                    let tex = pca.textures(fit(vars.texture.val()));
+                    let t = assets.num_texels();
+                    let hand = |k: usize| tex.clone().narrow(0, k, 1).reshape([3, t]);
+                    let light = point_light(&LightParams::from_raw(fit(vars.light.val())));
+                    Some(([hand(0), hand(1)], light))
+                }
+                Appearance::Fixed { textures, light } => {
+                    Some((textures.clone(), light.to_light(device)))
+                }
+            };
+            let (image, raster, clip) = match shading {
+                Some((textures, light)) => {
+                    let [l, r] = textures;
+                    let images = [
+                        gather.compact_to_image(l, [0.0; 3]),
+                        gather.compact_to_image(r, [0.0; 3]),
+                    ];
+                    let r = render(
+                        &assets.scene,
+                        &per_hand,
+                        &images,
+                        &render_camera,
+                        &light,
+                        &settings,
+                    )?;
+                    (Some(r.image), r.raster, r.clip)
+                }
+                None => {
+                    let clip = render_camera.clip_positions(cam_pts.clone(), depth)?;
+                    let raster = rasterize(clip.clone(), topology, h, w)?;
+                    (None, raster, clip)
+                }
             };
             if raster.num_covered() == 0 {
                 return Err(BittError::Invalid(format!(
@@ -1294,6 +1333,22 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn small_components_are_dropped() {
+        let (h, w) = (6, 10);
+        let mut mask = vec![0.0f32; h * w];
+        for y in 0..5 {
+            for x in 0..5 {
+                mask[y * w + x] = 1.0;
+            }
+        }
+        mask[2 * w + 8] = 1.0; // a speck
+        let kept = drop_small_components(&mask, [h, w], 0.05);
+        assert_eq!(kept[2 * w + 8], 0.0);
+        assert_eq!(kept.iter().sum::<f32>(), 25.0);
+        assert_eq!(drop_small_components(&mask, [h, w], 0.0), mask);
     }
 
     #[test]
