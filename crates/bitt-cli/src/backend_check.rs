@@ -1,7 +1,8 @@
 //! A small, fixed, real computation run on one backend: a padded conv2d with bias, `tanh`,
 //! a matmul and a mean-square loss, then the gradients of the conv weight and bias; and a
 //! texture PCA turned into a UV image by the layout's gather, with the gradient of a loss on
-//! the image with respect to the PCA parameters. The
+//! the image with respect to the PCA parameters; and the differentiable hand layer posing
+//! both procedural hands, with the gradient with respect to the finger pose. The
 //! numbers are printed as JSON so `cargo xtask e2e` can compare backends.
 
 use std::time::Instant;
@@ -34,6 +35,49 @@ struct Numbers {
     /// with respect to the PCA parameters: the compact -> image gather path.
     texture_image_sums: Vec<f32>,
     grad_texture_params: Vec<f32>,
+    /// The differentiable hand layer on the procedural hands: per hand, the sums of the
+    /// posed vertices' x, y, z, and the gradient of a weighted sum of the vertices with
+    /// respect to both hands' finger axis-angles.
+    hand_vertex_sums: Vec<f32>,
+    grad_hand_pose: Vec<f32>,
+}
+
+/// The hand layer (`bitt::hand_layer`) posing both procedural hands, with a gradient.
+fn hand_layer_check(device: &Device) -> Result<(Vec<f32>, Vec<f32>)> {
+    use bitt::hand_layer::{HandLayer, HandLayerParams};
+    let models = bitt_mesh::procedural_pair();
+    let ad = device.clone().autodiff();
+    let layer = HandLayer::new(&models, &ad)?;
+    let v = layer.num_vertices();
+    let t2 = |values: Vec<f32>, shape: [usize; 2]| {
+        Tensor::<2>::from_data(TensorData::new(values, shape), &ad)
+    };
+    let pose = t2(pattern(90, 0.4, 0.29, 0.3), [2, 45]).require_grad();
+    let params = HandLayerParams {
+        root_6d: t2(
+            vec![1.0, 0.1, 0.0, -0.1, 1.0, 0.2, 0.9, -0.2, 0.1, 0.3, 1.0, 0.0],
+            [2, 6],
+        ),
+        finger_pose: pose.clone(),
+        betas: t2(pattern(20, 1.0, 0.41, 0.5), [2, 10]),
+        trans: t2(vec![-0.1, 0.0, 0.6, 0.1, 0.02, 0.6], [2, 3]),
+    };
+    let out = layer.forward(&params);
+    let weights = Tensor::<3>::from_data(
+        TensorData::new(pattern(2 * v * 3, 1.0, 0.013, 0.2), [2, v, 3]),
+        &ad,
+    );
+    let grads = (out.vertices.clone() * weights).sum().backward();
+    let sums = out.vertices.without_autodiff().sum_dim(1).reshape([6]);
+    let grad = pose
+        .grad(&grads)
+        .context("no gradient for the finger pose")?;
+    let read = |t: Tensor<1>| {
+        t.into_data()
+            .try_to_vec::<f32>()
+            .map_err(|e| anyhow::anyhow!("{e:?}"))
+    };
+    Ok((read(sums)?, read(grad.reshape([90]))?))
 }
 
 /// A small texture PCA on a 9x7 layout (every other texel used), deterministic.
@@ -123,7 +167,10 @@ fn compute(device: &Device) -> Result<Numbers> {
     let gw = w.grad(&grads).context("no gradient for the conv weight")?;
     let gb = b.grad(&grads).context("no gradient for the conv bias")?;
     let (texture_image_sums, grad_texture_params) = texture_check(device)?;
+    let (hand_vertex_sums, grad_hand_pose) = hand_layer_check(device)?;
     Ok(Numbers {
+        hand_vertex_sums,
+        grad_hand_pose,
         texture_image_sums,
         grad_texture_params,
         loss: loss_v,

@@ -60,7 +60,7 @@ pub struct EvalArgs {
     #[arg(long, requires = "model_dir")]
     pub html_dir: Option<PathBuf>,
     /// Methods, comma-separated: bitt, bitt-no-alb, bitt-no-sym, html, harp-like,
-    /// s2hand-like (default: all).
+    /// s2hand-like, bitt-refined (default: all but bitt-refined; see --refine-mesh).
     #[arg(long, value_delimiter = ',')]
     pub methods: Vec<String>,
     /// Add the method "BiTT + refined mesh": BiTT trained after refining the given meshes
