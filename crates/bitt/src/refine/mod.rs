@@ -1144,7 +1144,6 @@ fn hand_labels(
     hands: &TwoHandScene,
     scene: &bitt_render::scene::Scene,
 ) -> Result<Vec<u8>, BittError> {
-    let device = Device::flex();
     let posed = hands.pose_in_camera(models)?;
     let mut pts = Vec::new();
     for side in Side::BOTH {
@@ -1158,12 +1157,21 @@ fn hand_labels(
         translation: DVec3::ZERO,
         ..hands.camera
     });
-    let all = crate::assets::vertex_tensor(&pts, &device);
-    let clip = camera.clip_positions(all, DepthRange::default())?;
-    let raster = rasterize(clip, scene.topology(), camera.height(), camera.width())?;
+    let clip: Vec<[f32; 4]> = pts
+        .iter()
+        .map(|p| {
+            let c = camera.clip_point(*p, DepthRange::default());
+            [c.x as f32, c.y as f32, c.z as f32, c.w as f32]
+        })
+        .collect();
+    let fragments = bitt_render::cpu::rasterize(
+        &clip,
+        scene.topology().faces(),
+        camera.width(),
+        camera.height(),
+    )?;
     let left_faces = scene.face_range(0);
-    Ok(raster
-        .fragments
+    Ok(fragments
         .face
         .iter()
         .map(|&f| {
