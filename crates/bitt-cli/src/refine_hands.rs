@@ -14,7 +14,7 @@ use bitt_nets::Preset;
 use bitt_synth::SynthScene;
 
 use crate::device::DeviceName;
-use crate::train_scene::{sources, training_config};
+use crate::train_scene::{HandsArgs, training_config};
 
 /// Arguments of `bitt refine-hands`.
 #[derive(Debug, clap::Args)]
@@ -33,17 +33,9 @@ pub struct RefineHandsArgs {
     /// whose mean RGB is above 0.15 (the reference's rule for the demo frames).
     #[arg(long, requires = "image")]
     pub mask: Option<PathBuf>,
-    /// Folder with MANO_LEFT / MANO_RIGHT (`.pkl` or `.safetensors`); needs --html-dir.
-    /// Default: the procedural hands.
-    #[arg(long, conflicts_with = "procedural")]
-    pub model_dir: Option<PathBuf>,
-    /// Use the procedural hands (the default without --model-dir).
-    #[arg(long)]
-    pub procedural: bool,
-    /// HTML's TextureBasis folder, the texture prior of the photometric term (with
-    /// --model-dir). Default: the procedural texture PCA.
-    #[arg(long, requires = "model_dir")]
-    pub html_dir: Option<PathBuf>,
+    /// The hand models and the texture prior (of the photometric term).
+    #[command(flatten)]
+    pub hands: HandsArgs,
     /// Preset whose image size (`quick`: 128) and texture prior the refinement uses.
     #[arg(long, default_value = "quick")]
     pub preset: Preset,
@@ -157,7 +149,7 @@ pub fn run(args: &RefineHandsArgs) -> Result<()> {
     check_refine_out(&args.out)?;
     let mut bar = RefineBar::new();
     if let Some(dir) = &args.scene {
-        if args.model_dir.is_some() || args.mask.is_some() {
+        if args.hands.model_dir.is_some() || args.mask.is_some() {
             bail!("--scene refines a synthetic scene's procedural hands: drop --model-dir/--mask");
         }
         let scene = SynthScene::read(dir).with_context(|| format!("--scene {}", dir.display()))?;
@@ -181,7 +173,7 @@ pub fn run(args: &RefineHandsArgs) -> Result<()> {
             done.iou_truth_before, done.iou_truth_after, done.refinement.report.seconds
         );
     } else if let (Some(image), Some(annotation)) = (&args.image, &args.annotation) {
-        let (hands, prior) = sources(args.model_dir.as_deref(), args.html_dir.as_deref());
+        let (hands, prior) = args.hands.sources();
         let size = args.size.unwrap_or(bitt::real::BITT_CROP_SIZE as usize);
         if !(32..=1024).contains(&size) {
             bail!("--size must be within 32-1024, got {size}");

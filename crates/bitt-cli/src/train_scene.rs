@@ -67,18 +67,9 @@ pub struct TrainSceneArgs {
     /// InterHand2.6M: number of novel poses scored after training (default: the paper's 8).
     #[arg(long, requires = "interhand")]
     pub novel_poses: Option<usize>,
-    /// Real data: folder with MANO_LEFT / MANO_RIGHT (`.pkl` or `.safetensors`); needs
-    /// --html-dir. Default: the procedural hands.
-    #[arg(long, conflicts_with = "procedural")]
-    pub model_dir: Option<PathBuf>,
-    /// Real data: use the procedural hands (the default without --model-dir).
-    #[arg(long)]
-    pub procedural: bool,
-    /// Real data: HTML's TextureBasis folder (html.safetensors or model_wosr/model.pkl, and
-    /// uvs*.pkl) as the texture prior, resampled to the preset's texture size; needs
-    /// --model-dir. Default: the procedural texture PCA.
-    #[arg(long, requires = "model_dir")]
-    pub html_dir: Option<PathBuf>,
+    /// Real data: the hand models and texture prior.
+    #[command(flatten)]
+    pub hands: HandsArgs,
     /// Named configuration.
     #[arg(long, default_value = "quick")]
     pub preset: Preset,
@@ -195,12 +186,6 @@ enum Input {
     Real(Box<RealInput>, Box<RealScene>),
 }
 
-/// The hands and prior the real-data options ask for.
-fn real_sources(args: &TrainSceneArgs) -> (HandSource, PriorSource) {
-    let (hands, prior) = sources(args.model_dir.as_deref(), args.html_dir.as_deref());
-    (hands, prior)
-}
-
 /// A fresh run's trainer and input; nothing is written.
 fn fresh(
     args: &TrainSceneArgs,
@@ -219,24 +204,24 @@ fn fresh(
         observer: &mut bar,
     });
     let real = args.image.is_some() || args.interhand.is_some();
-    if !real && (args.model_dir.is_some() || args.html_dir.is_some()) {
+    if !real && (args.hands.model_dir.is_some() || args.hands.html_dir.is_some()) {
         bail!(
             "--model-dir and --html-dir apply to real data: give --image IMG --annotation PKL \
              or --interhand ROOT"
         );
     }
-    let (hands, prior) = real_sources(args);
+    let (hands, prior) = args.hands.sources();
     if let (Some(image), Some(annotation)) = (&args.image, &args.annotation) {
         eprintln!(
             "real data: {} with {} ({} hands, {} texture prior)",
             image.display(),
             annotation.display(),
-            if args.model_dir.is_some() {
+            if args.hands.model_dir.is_some() {
                 "MANO"
             } else {
                 "procedural"
             },
-            if args.html_dir.is_some() {
+            if args.hands.html_dir.is_some() {
                 "HTML"
             } else {
                 "procedural PCA"
@@ -406,6 +391,30 @@ pub(crate) fn training_config(config: Option<&Path>, preset: Preset) -> Result<T
             Ok(TrainConfig::from_json(&text, path)?)
         }
         None => Ok(TrainConfig::preset(preset)),
+    }
+}
+
+/// The hand models and texture prior of real data (`train-scene`, `refine-hands`).
+#[derive(Debug, Clone, clap::Args)]
+pub struct HandsArgs {
+    /// Real data: folder with MANO_LEFT / MANO_RIGHT (`.pkl` or `.safetensors`); needs
+    /// --html-dir. Default: the procedural hands.
+    #[arg(long, conflicts_with = "procedural")]
+    pub model_dir: Option<PathBuf>,
+    /// Real data: use the procedural hands (the default without --model-dir).
+    #[arg(long)]
+    pub procedural: bool,
+    /// Real data: HTML's TextureBasis folder (html.safetensors or model_wosr/model.pkl, and
+    /// uvs*.pkl) as the texture prior, resampled to the preset's texture size; needs
+    /// --model-dir. Default: the procedural texture PCA.
+    #[arg(long, requires = "model_dir")]
+    pub html_dir: Option<PathBuf>,
+}
+
+impl HandsArgs {
+    /// The sources these options name.
+    pub fn sources(&self) -> (HandSource, PriorSource) {
+        sources(self.model_dir.as_deref(), self.html_dir.as_deref())
     }
 }
 
