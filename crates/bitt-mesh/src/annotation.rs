@@ -100,6 +100,44 @@ impl TwoHandScene {
         })
     }
 
+    /// Mean and largest distance (pixels of this scene's camera) between the projections of
+    /// corresponding vertices of this scene's hands and `other`'s (the same hands posed
+    /// otherwise, seen by this camera); vertices behind the camera are skipped, `(0, 0)`
+    /// when none is compared.
+    ///
+    /// # Errors
+    /// When a hand cannot be posed.
+    pub fn projected_distance_px(
+        &self,
+        other: &TwoHandScene,
+        models: &HandPair,
+    ) -> Result<(f64, f64), MeshError> {
+        let a = self.pose_in_camera(models)?;
+        let b = TwoHandScene {
+            camera: self.camera,
+            ..other.clone()
+        }
+        .pose_in_camera(models)?;
+        let (mut sum, mut max, mut n) = (0.0f64, 0.0f64, 0usize);
+        for side in Side::BOTH {
+            if let (Some(x), Some(y)) = (a.get(side), b.get(side)) {
+                for (p, q) in x.vertices.iter().zip(&y.vertices) {
+                    let (u, v) = (
+                        self.camera.camera_to_pixel(*p),
+                        self.camera.camera_to_pixel(*q),
+                    );
+                    if let (Some(u), Some(v)) = (u, v) {
+                        let d = u.distance(v);
+                        sum += d;
+                        max = max.max(d);
+                        n += 1;
+                    }
+                }
+            }
+        }
+        Ok((if n > 0 { sum / n as f64 } else { 0.0 }, max))
+    }
+
     /// The pixel bounding box of a posed hand's vertices (camera-frame input), or `None` when
     /// no vertex is in front of the camera.
     pub fn pixel_box(&self, camera_frame_vertices: &[DVec3]) -> Option<PixelBox> {

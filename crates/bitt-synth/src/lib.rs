@@ -226,25 +226,10 @@ impl SynthScene {
     /// # Errors
     /// When a hand cannot be posed.
     pub fn given_mesh_error_px(&self) -> Result<(f64, f64), SynthError> {
-        let models = procedural_pair();
-        let truth = self.train.hands.pose_in_camera(&models)?;
-        let given = self.given.pose_in_camera(&models)?;
-        let cam = &self.train.hands.camera;
-        let (mut sum, mut max, mut n) = (0.0f64, 0.0f64, 0usize);
-        for (t, g) in [(&truth.left, &given.left), (&truth.right, &given.right)] {
-            if let (Some(t), Some(g)) = (t, g) {
-                for (a, b) in t.vertices.iter().zip(&g.vertices) {
-                    if let (Some(pa), Some(pb)) = (cam.camera_to_pixel(*a), cam.camera_to_pixel(*b))
-                    {
-                        let d = pa.distance(pb);
-                        sum += d;
-                        max = max.max(d);
-                        n += 1;
-                    }
-                }
-            }
-        }
-        Ok((if n > 0 { sum / n as f64 } else { 0.0 }, max))
+        Ok(self
+            .train
+            .hands
+            .projected_distance_px(&self.given, &procedural_pair())?)
     }
 
     /// Every view: train, novel views, novel poses.

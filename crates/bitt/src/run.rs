@@ -89,7 +89,7 @@ pub fn write_training_refinement(
         &trainer.assets.scene,
         &at_view(&refinement.initial),
         &at_view(&refinement.hands),
-        512usize.div_ceil(w.max(1)).clamp(1, 8),
+        crate::refine::overlay_scale(w),
     )?;
     let mut record = serde_json::json!({
         "kind": "train-scene",

@@ -10,8 +10,8 @@ use burn::tensor::Device;
 
 use super::{
     MASK_THRESHOLD, RefineConfig, RefineObserver, Refinement, SPECK_FRACTION,
-    drop_small_components, overlay, refine_synthetic, refine_view, silhouette, threshold_mask,
-    vertex_error_px,
+    drop_small_components, overlay, overlay_scale, refine_synthetic, refine_view, silhouette,
+    threshold_mask, vertex_error_px,
 };
 use crate::BittError;
 use crate::assets::HandAssets;
@@ -25,13 +25,6 @@ use crate::real::{
 
 /// The refined hands file of `bitt refine-hands`.
 pub const HANDS_JSON: &str = "hands.json";
-
-/// The overlay's enlargement: images are drawn at least this many pixels wide.
-const OVERLAY_MIN_SIDE: usize = 512;
-
-fn overlay_scale(width: usize) -> usize {
-    OVERLAY_MIN_SIDE.div_ceil(width.max(1)).clamp(1, 8)
-}
 
 /// A synthetic scene's refinement with its scores against the true meshes.
 #[derive(Debug, Clone)]

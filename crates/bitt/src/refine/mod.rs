@@ -1291,8 +1291,9 @@ pub fn silhouette_iou(
     Ok(mask_iou(&silhouette(models, hands, scene)?, mask))
 }
 
-/// Mean and largest distance (pixels) between the projections of corresponding vertices of
-/// two scenes of the same hands seen by `a`'s camera.
+/// Mean and largest distance (pixels of `a`'s camera) between the projections of
+/// corresponding vertices of two scenes of the same hands
+/// ([`TwoHandScene::projected_distance_px`]).
 ///
 /// # Errors
 /// When a hand cannot be posed.
@@ -1301,23 +1302,12 @@ pub fn vertex_error_px(
     a: &TwoHandScene,
     b: &TwoHandScene,
 ) -> Result<(f64, f64), BittError> {
-    let pa = a.pose_in_camera(models)?;
-    let pb = b.pose_in_camera(models)?;
-    let cam = &a.camera;
-    let (mut sum, mut max, mut n) = (0.0f64, 0.0f64, 0usize);
-    for side in Side::BOTH {
-        if let (Some(x), Some(y)) = (pa.get(side), pb.get(side)) {
-            for (p, q) in x.vertices.iter().zip(&y.vertices) {
-                if let (Some(u), Some(v)) = (cam.camera_to_pixel(*p), cam.camera_to_pixel(*q)) {
-                    let d = u.distance(v);
-                    sum += d;
-                    max = max.max(d);
-                    n += 1;
-                }
-            }
-        }
-    }
-    Ok((sum / n.max(1) as f64, max))
+    Ok(a.projected_distance_px(b, models)?)
+}
+
+/// The overlay's enlargement for an image `width` pixels wide: drawn at least 512 wide.
+pub fn overlay_scale(width: usize) -> usize {
+    512usize.div_ceil(width.max(1)).clamp(1, 8)
 }
 
 #[cfg(test)]
