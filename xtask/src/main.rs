@@ -408,7 +408,7 @@ fn main() -> Result<()> {
         "demo" => bitt(&[&["demo".to_string()], rest].concat()),
         "pose-hands" | "convert-mano" | "texture" | "convert-html" | "render" | "train-scene"
         | "render-avatar" | "synth" | "eval" | "eval-merge" | "metrics" | "convert-lpips"
-        | "refine-hands" => bitt(&args),
+        | "refine-hands" | "fit-hands" => bitt(&args),
         "test" => {
             let status = cargo()
                 .args(["test", "--workspace", "--release"])

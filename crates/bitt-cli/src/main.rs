@@ -8,6 +8,7 @@ mod bench_render;
 mod demo;
 mod device;
 mod eval;
+mod fit_hands;
 mod metrics;
 mod nets;
 mod pose_hands;
@@ -75,7 +76,7 @@ enum Command {
     Synth(synth::SynthArgs),
     /// Train BiTT on one scene (default: the built-in demo scene) and write the run folder:
     /// textures, light, renders, avatar.glb, metrics and report.html.
-    TrainScene(train_scene::TrainSceneArgs),
+    TrainScene(Box<train_scene::TrainSceneArgs>),
     /// The paper's evaluation on the synthetic benchmark: every method trained per scene,
     /// scored on the input view, novel views and poses and in texture space, both mesh
     /// settings; writes results.json, results.md (the paper's tables) and contact sheets.
@@ -86,6 +87,11 @@ enum Command {
     /// differentiable renderer (a synthetic scene's perturbed meshes, or a photo with its
     /// annotation); writes hands.json, refine.json and overlay.png.
     RefineHands(refine_hands::RefineHandsArgs),
+    /// Fit both hands to a photo's 2D keypoints (OpenPose, MediaPipe or plain JSON), with
+    /// the photo's intrinsics or a default camera, optionally refined against a hand mask;
+    /// writes hands.json (an annotation for train-scene), fit.json and overlay.png. With
+    /// --scene, the fit on synthetic scenes scored against their true hands.
+    FitHands(fit_hands::FitHandsArgs),
     /// Render a trained run's avatar at another view (`--view AZ,EL`), pose or light.
     RenderAvatar(render_avatar::RenderAvatarArgs),
     /// Time the renderer's stages forward and backward (JSON; `cargo xtask bench render`).
@@ -121,6 +127,7 @@ fn main() -> Result<()> {
         Command::TrainScene(args) => train_scene::run(&args),
         Command::RenderAvatar(args) => render_avatar::run(&args),
         Command::RefineHands(args) => refine_hands::run(&args),
+        Command::FitHands(args) => fit_hands::run(&args),
         Command::Eval(args) => eval::run(&args),
         Command::EvalMerge(args) => eval::merge_cmd(&args),
         Command::BenchRender(args) => bench_render::run(&args),

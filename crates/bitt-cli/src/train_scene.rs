@@ -12,23 +12,36 @@ use std::sync::OnceLock;
 /// Where a run goes without `--out`.
 const DEFAULT_OUT: &str = "runs/train-scene";
 
+/// The keypoint fit's record in a run folder (`--keypoints`).
+const FIT_RECORD: &str = "fit.json";
+
+/// The keypoint fit's overlay in a run folder.
+const FIT_OVERLAY: &str = "fit_overlay.png";
+
 use anyhow::{Context, Result, bail};
 use bitt::assets::HandAssets;
 use bitt::checkpoint::Checkpoint;
+use bitt::fit::{fit_keypoints, fit_photo, keypoint_overlay, score_fit};
+use bitt::real::keypoint_setup;
 use bitt::real::{
     HandSource, PriorSource, RealInput, RealScene, RealScores, annotation_setup, interhand_setup,
     score_real,
 };
-use bitt::refine::{MeshRefine, Refinement, pca_pose_notes, refine_synthetic};
+use bitt::refine::{
+    MeshRefine, RefineConfig, RefineObserver, Refinement, pca_pose_notes, refine_synthetic,
+};
 use bitt::run::{files, synthetic_trainer, texture_prior, write_run, write_training_refinement};
 use bitt::{Observer, Progress, TrainConfig, Trainer};
 use bitt_mesh::interhand::{
     InterHandDataset, InterHandSelection, PAPER_NOVEL_POSES, PAPER_NOVEL_VIEWS,
 };
+use bitt_mesh::keypoints::{KeypointOptions, read_keypoints};
+use bitt_mesh::{PinholeCamera, TwoHandScene};
 use bitt_nets::Preset;
 use bitt_synth::{SynthConfig, SynthScene};
 
 use crate::device::DeviceName;
+use crate::fit_hands::FitBar;
 use crate::refine_hands::{RefineBar, refine_config};
 
 /// Arguments of `bitt train-scene`.
@@ -38,13 +51,27 @@ pub struct TrainSceneArgs {
     /// (and cached) by the synthetic generator.
     #[arg(long)]
     pub scene: Option<PathBuf>,
-    /// Real data: a photograph of two interacting hands (with --annotation). Its annotation's
-    /// camera is for the reference's 256x256 crop (the BiTT demo `NN.jpg`).
-    #[arg(long, requires = "annotation", conflicts_with_all = ["scene", "interhand"])]
+    /// Real data: a photograph of two interacting hands, with --annotation (whose camera is
+    /// for the reference's 256x256 crop, the BiTT demo `NN.jpg`) or with --keypoints (any
+    /// size; the hands are fitted to them first, as `bitt fit-hands` does).
+    #[arg(long, conflicts_with_all = ["scene", "interhand"])]
     pub image: Option<PathBuf>,
-    /// Real data: the image's BiTT annotation pickle (the demo `NN.pkl` layout).
+    /// Real data: the image's BiTT annotation pickle (the demo `NN.pkl` layout) or a
+    /// `hands.json` (`bitt refine-hands`, `bitt fit-hands`).
     #[arg(long, requires = "image")]
     pub annotation: Option<PathBuf>,
+    /// 2D hand keypoints (OpenPose, MediaPipe or plain JSON; docs/keypoints.md) of --image,
+    /// or of a synthetic --scene's training view: both hands are fitted to them, and the run
+    /// trains on the fitted hands. The run folder gets `fit.json` and `fit_overlay.png`.
+    #[arg(long, conflicts_with_all = ["annotation", "interhand"])]
+    pub keypoints: Option<PathBuf>,
+    /// Keypoint format, mirroring, intrinsics and fit configuration (with --keypoints).
+    #[command(flatten)]
+    pub keypoint: crate::fit_hands::KeypointArgs,
+    /// With --image --keypoints: the photo's hand mask (white = hand); the fitted hands are
+    /// then refined against it before training.
+    #[arg(long, requires = "keypoints")]
+    pub mask: Option<PathBuf>,
     /// Real data: the InterHand2.6M root; selects a scene (training view, novel views of the
     /// same frame, novel poses of the same capture; see docs/training.md for the rule).
     #[arg(long, conflicts_with = "scene")]
@@ -187,11 +214,20 @@ enum Input {
 }
 
 /// A fresh run's trainer and input; nothing is written.
+/// A keypoint fit to record in the run folder: `fit.json` and its overlay.
+struct FitOutput {
+    record: serde_json::Value,
+    overlay: (Vec<f32>, [usize; 2]),
+}
+
+/// What a fresh run starts from.
+type Fresh = (Trainer, Input, Option<Refinement>, Option<FitOutput>);
+
 fn fresh(
     args: &TrainSceneArgs,
     config: TrainConfig,
     device: &burn::tensor::Device,
-) -> Result<(Trainer, Input, Option<Refinement>)> {
+) -> Result<Fresh> {
     let cache = Some(args.cache.as_path());
     let refine_config = if args.refine_mesh {
         Some(refine_config(args.refine_config.as_deref(), None, None)?)
@@ -211,6 +247,69 @@ fn fresh(
         );
     }
     let (hands, prior) = args.hands.sources();
+    if let (Some(image), None) = (&args.image, &args.annotation) {
+        let Some(keypoints) = &args.keypoints else {
+            bail!("--image needs --annotation PKL or --keypoints FILE");
+        };
+        eprintln!(
+            "real data: {} with the keypoints {} (fitting both hands to them first)",
+            image.display(),
+            keypoints.display()
+        );
+        let fit_config = args.keypoint.config()?;
+        let mask_refine = RefineConfig::default();
+        let mut mask_bar = RefineBar::new();
+        let fit = fit_photo(
+            image,
+            &args.keypoint.source(keypoints),
+            args.keypoint.intrinsics()?,
+            args.mask.as_deref(),
+            &hands,
+            &prior,
+            &fit_config,
+            args.mask.as_ref().map(|_| {
+                (
+                    &config,
+                    &mask_refine,
+                    &mut mask_bar as &mut dyn RefineObserver,
+                )
+            }),
+            cache,
+            device,
+            &mut FitBar::new(),
+        )
+        .with_context(|| {
+            format!(
+                "fitting --image {} --keypoints {}",
+                image.display(),
+                keypoints.display()
+            )
+        })?;
+        eprintln!();
+        for n in &fit.fit.report.notes {
+            eprintln!("note: {n}");
+        }
+        let setup = keypoint_setup(
+            &fit,
+            image,
+            keypoints,
+            &hands,
+            &prior,
+            config,
+            cache,
+            refine.take(),
+            device,
+        )?;
+        return Ok((
+            setup.trainer,
+            Input::Real(Box::new(setup.input), Box::new(setup.scene)),
+            setup.refinement,
+            Some(FitOutput {
+                record: fit.record(),
+                overlay: fit.overlay.clone(),
+            }),
+        ));
+    }
     if let (Some(image), Some(annotation)) = (&args.image, &args.annotation) {
         eprintln!(
             "real data: {} with {} ({} hands, {} texture prior)",
@@ -257,6 +356,7 @@ fn fresh(
             setup.trainer,
             Input::Real(Box::new(setup.input), Box::new(setup.scene)),
             setup.refinement,
+            None,
         ));
     }
     if let Some(root) = &args.interhand {
@@ -297,6 +397,7 @@ fn fresh(
             setup.trainer,
             Input::Real(Box::new(setup.input), Box::new(setup.scene)),
             setup.refinement,
+            None,
         ));
     }
     let mut scene = match &args.scene {
@@ -313,6 +414,10 @@ fn fresh(
                 &device.clone().inner(),
             )?
         }
+    };
+    let fit_output = match &args.keypoints {
+        Some(keypoints) => Some(fit_synthetic(args, &mut scene, keypoints, device)?),
+        None => None,
     };
     eprintln!(
         "fitting / loading the texture PCA ({} components)",
@@ -338,7 +443,98 @@ fn fresh(
         None => None,
     };
     let trainer = synthetic_trainer(&scene, &config, &pca, device)?;
-    Ok((trainer, Input::Synthetic(Box::new(scene)), refinement))
+    Ok((
+        trainer,
+        Input::Synthetic(Box::new(scene)),
+        refinement,
+        fit_output,
+    ))
+}
+
+/// Fits a synthetic scene's hands to `keypoints` of its training image (the scene's true
+/// camera, or `--intrinsics`) and makes them the scene's given meshes.
+fn fit_synthetic(
+    args: &TrainSceneArgs,
+    scene: &mut SynthScene,
+    keypoints: &Path,
+    device: &burn::tensor::Device,
+) -> Result<FitOutput> {
+    if args.keypoint.mirrored {
+        bail!("--mirrored applies to photos, not to a synthetic scene");
+    }
+    let truth = scene.train.hands.camera;
+    let options = KeypointOptions {
+        format: args.keypoint.format.map(Into::into),
+        image_size: [truth.width, truth.height],
+        mirrored: false,
+    };
+    let points = read_keypoints(keypoints, &options)?;
+    let camera = match args.keypoint.intrinsics()? {
+        Some([fx, fy, cx, cy]) => PinholeCamera {
+            intrinsics: PinholeCamera::from_intrinsics(
+                [fx, fy],
+                [cx, cy],
+                truth.width,
+                truth.height,
+            )?
+            .intrinsics,
+            ..truth
+        },
+        None => truth,
+    };
+    eprintln!(
+        "fitting both hands to the keypoints {} of the scene's training image",
+        keypoints.display()
+    );
+    let models = bitt_mesh::procedural_pair();
+    let fit = fit_keypoints(
+        &models,
+        &points,
+        &camera,
+        &args.keypoint.config()?,
+        device,
+        &mut FitBar::new(),
+    )
+    .with_context(|| format!("fitting --keypoints {}", keypoints.display()))?;
+    eprintln!();
+    for n in &fit.report.notes {
+        eprintln!("note: {n}");
+    }
+    if fit.hands.left.is_none() || fit.hands.right.is_none() {
+        bail!(
+            "{}: a hand has too few keypoints to be fitted; BiTT needs both",
+            keypoints.display()
+        );
+    }
+    let scores = score_fit(&fit, scene, &camera)?;
+    eprintln!(
+        "fitted in {:.1} s: 2D joints {:.2} px, root-relative 3D joints {:.1} mm from the truth",
+        fit.report.seconds, scores.joint_2d_px, scores.joint_3d_mm
+    );
+    let assets = HandAssets::new(models.clone(), 64)?;
+    let overlay = keypoint_overlay(
+        &scene.train.image,
+        &models,
+        &assets,
+        &points,
+        &TwoHandScene {
+            camera,
+            ..fit.hands.clone()
+        },
+    )?;
+    scene.given = TwoHandScene {
+        camera: scene.given.camera,
+        ..fit.hands.clone()
+    };
+    Ok(FitOutput {
+        record: serde_json::json!({
+            "kind": "keypoint fit (synthetic scene)",
+            "keypoints": keypoints.display().to_string(),
+            "report": fit.report,
+            "scores_vs_truth": scores,
+        }),
+        overlay,
+    })
 }
 
 /// A resumed run's trainer (checkpoint restored) and input.
@@ -486,7 +682,7 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
             config.validate()?;
             // Every input is read and checked (and the trainer built) before the run folder
             // is created, so a bad input leaves nothing behind.
-            let (trainer, input, refinement) = fresh(args, config, &device)?;
+            let (trainer, input, refinement, fit) = fresh(args, config, &device)?;
             std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
             bitt_mesh::export::write_atomically(
                 &out.join(files::CONFIG),
@@ -495,6 +691,11 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
             match &input {
                 Input::Synthetic(scene) => scene.write(&out.join(files::SCENE))?,
                 Input::Real(record, scene) => record.write(&out, scene)?,
+            }
+            if let Some(f) = &fit {
+                bitt::outputs::write_json(&out.join(FIT_RECORD), &f.record)?;
+                let [h, w] = f.overlay.1;
+                bitt::outputs::write_png(&out.join(FIT_OVERLAY), &f.overlay.0, h, w)?;
             }
             if let Some(r) = &refinement {
                 let truth = match &input {

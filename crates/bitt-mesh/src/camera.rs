@@ -96,6 +96,47 @@ impl PinholeCamera {
         Ok(())
     }
 
+    /// The camera assumed for a photo of unknown intrinsics, `width` x `height` pixels:
+    /// identity extrinsics, the principal point at the image centre (`(w - 1) / 2`,
+    /// `(h - 1) / 2` in this module's pixel convention) and both focal lengths
+    /// equal to the image diagonal in pixels (a 53 degree diagonal field of view, between a
+    /// phone's main camera and a portrait lens).
+    ///
+    /// # Errors
+    /// A zero size.
+    pub fn default_for_image(width: u32, height: u32) -> Result<Self, MeshError> {
+        let (w, h) = (f64::from(width), f64::from(height));
+        Self::from_intrinsics(
+            [(w * w + h * h).sqrt(); 2],
+            [(w - 1.0) / 2.0, (h - 1.0) / 2.0],
+            width,
+            height,
+        )
+    }
+
+    /// A camera with identity extrinsics and intrinsics `fx, fy, cx, cy` (pixels).
+    ///
+    /// # Errors
+    /// A zero size, or focal lengths that are not positive and finite.
+    pub fn from_intrinsics(
+        [fx, fy]: [f64; 2],
+        [cx, cy]: [f64; 2],
+        width: u32,
+        height: u32,
+    ) -> Result<Self, MeshError> {
+        Self::new(
+            DMat3::from_cols(
+                DVec3::new(fx, 0.0, 0.0),
+                DVec3::new(0.0, fy, 0.0),
+                DVec3::new(cx, cy, 1.0),
+            ),
+            DMat3::IDENTITY,
+            DVec3::ZERO,
+            width,
+            height,
+        )
+    }
+
     /// Focal lengths `(fx, fy)` in pixels.
     pub fn focal(&self) -> DVec2 {
         DVec2::new(self.intrinsics.x_axis.x, self.intrinsics.y_axis.y)

@@ -60,6 +60,18 @@ impl HandParams {
         }
     }
 
+    /// The same hand after moving everything by `x -> rotation x + translation` (e.g. from a
+    /// camera frame into the world frame): the root rotation is turned and the translation
+    /// moved so that `model` poses the moved hand exactly. The finger pose and shape are kept.
+    pub fn rigidly_moved(&self, model: &HandModel, rotation: DMat3, translation: DVec3) -> Self {
+        let wrist = model.regress_joints(&model.shaped_vertices(&self.betas))[0];
+        HandParams {
+            root_rotation: rotation * self.root_rotation,
+            trans: rotation * (wrist + self.trans) + translation - wrist,
+            ..self.clone()
+        }
+    }
+
     /// Checks lengths and that every value is finite.
     pub fn validate(&self) -> Result<(), MeshError> {
         let pose = match &self.pose {

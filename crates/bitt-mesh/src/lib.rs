@@ -7,6 +7,7 @@
 //! - [`camera`]: pinhole and orthographic cameras.
 //! - [`annotation`]: BiTT/InterHand annotation pickles and InterHand2.6M JSON.
 //! - [`interhand`]: the InterHand2.6M dataset reader and the paper's scene selection.
+//! - [`keypoints`]: 2D hand keypoints from OpenPose, MediaPipe and a plain JSON format.
 //! - [`export`]: OBJ and glTF 2.0 binary writers.
 //!
 //! This crate knows nothing of tensors, networks or textures beyond a UV layout, and never
@@ -17,6 +18,7 @@ pub mod camera;
 pub mod error;
 pub mod export;
 pub mod interhand;
+pub mod keypoints;
 pub mod lbs;
 pub mod mano;
 pub mod model;

@@ -92,6 +92,10 @@ struct ViewFile {
     family: PoseFamily,
     hands: TwoHandScene,
     light: LightValues,
+    /// Each hand's 21 true 2D joints (pixels, OpenPose order): a plain keypoint file's
+    /// content. Written for users and tools; recomputed from `hands` when read.
+    #[serde(default, skip_deserializing)]
+    keypoints_2d: Option<serde_json::Value>,
 }
 
 #[derive(Debug, serde::Serialize, serde::Deserialize)]
@@ -111,13 +115,17 @@ struct SceneFile {
     novel_poses: Vec<ViewFile>,
 }
 
-fn view_file(v: &SynthView) -> ViewFile {
-    ViewFile {
+fn view_file(v: &SynthView) -> Result<ViewFile, SynthError> {
+    let keypoints = v.keypoints_2d()?;
+    let plain = serde_json::from_str(&keypoints.to_plain_json())
+        .map_err(|e| SynthError::Generate(format!("encoding the keypoints of {}: {e}", v.name)))?;
+    Ok(ViewFile {
         name: v.name.clone(),
         family: v.family,
         hands: v.hands.clone(),
         light: v.light,
-    }
+        keypoints_2d: Some(plain),
+    })
 }
 
 fn f32_bytes(values: &[f32]) -> Vec<u8> {
@@ -140,9 +148,17 @@ pub(crate) fn write(scene: &SynthScene, dir: &Path) -> Result<(), SynthError> {
         stats: scene.stats,
         given: scene.given.clone(),
         num_texels: t,
-        train: view_file(&scene.train),
-        novel_views: scene.novel_views.iter().map(view_file).collect(),
-        novel_poses: scene.novel_poses.iter().map(view_file).collect(),
+        train: view_file(&scene.train)?,
+        novel_views: scene
+            .novel_views
+            .iter()
+            .map(view_file)
+            .collect::<Result<_, _>>()?,
+        novel_poses: scene
+            .novel_poses
+            .iter()
+            .map(view_file)
+            .collect::<Result<_, _>>()?,
     };
     let json_path = dir.join("scene.json");
     let json = serde_json::to_string_pretty(&file)

@@ -42,9 +42,10 @@ use std::path::Path;
 
 use bitt_mesh::annotation::FrameInfo;
 use bitt_mesh::glam::DVec3;
+use bitt_mesh::keypoints::{Keypoint, KeypointFormat, TwoHandKeypoints};
 use bitt_mesh::lbs::{HandParams, HandPose, rodrigues};
 use bitt_mesh::model::NUM_BETAS;
-use bitt_mesh::{HandPair, TwoHandScene, procedural_pair};
+use bitt_mesh::{HandPair, Side, TwoHandScene, procedural_pair};
 use bitt_render::scene::LightValues;
 use bitt_texture::SkinIdentity;
 use bitt_texture::procedural::noise::{SplitMix64, derive};
@@ -172,6 +173,43 @@ pub struct SynthView {
     pub image: Vec<f32>,
     /// Left and right `[H, W]` masks in `{0, 1}` after mutual occlusion.
     pub masks: [Vec<f32>; 2],
+}
+
+impl SynthView {
+    /// Each hand's 21 true 2D joints in this view's image (pixels, OpenPose order,
+    /// confidence 1; a joint behind the camera has confidence 0), as `scene.json` holds them
+    /// under `keypoints_2d` (the plain keypoint format).
+    ///
+    /// # Errors
+    /// When a hand cannot be posed.
+    pub fn keypoints_2d(&self) -> Result<TwoHandKeypoints, SynthError> {
+        let posed = self.hands.pose_in_camera(&procedural_pair())?;
+        let hand = |side: Side| {
+            posed.get(side).map(|p| {
+                p.joints
+                    .iter()
+                    .map(|j| match self.hands.camera.camera_to_pixel(*j) {
+                        Some(q) => Keypoint {
+                            x: q.x,
+                            y: q.y,
+                            confidence: 1.0,
+                        },
+                        None => Keypoint {
+                            x: 0.0,
+                            y: 0.0,
+                            confidence: 0.0,
+                        },
+                    })
+                    .collect::<Vec<_>>()
+            })
+        };
+        Ok(TwoHandKeypoints {
+            left: hand(Side::Left),
+            right: hand(Side::Right),
+            format: KeypointFormat::Plain,
+            notes: Vec::new(),
+        })
+    }
 }
 
 /// The identity of a scene.

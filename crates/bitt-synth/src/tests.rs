@@ -190,6 +190,43 @@ fn write_read_round_trip_is_exact_and_errors_name_the_file() {
     let back = SynthScene::read(&dir).unwrap();
     assert_same(&back, &scene);
 
+    // Every view's true 2D joints are in scene.json as a plain keypoint file, and read back
+    // as the projections of the view's joints.
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("scene.json")).unwrap()).unwrap();
+    let kp = &json["train"]["keypoints_2d"];
+    let options = bitt_mesh::keypoints::KeypointOptions {
+        format: None,
+        image_size: [cfg.size, cfg.size],
+        mirrored: false,
+    };
+    let read = bitt_mesh::keypoints::parse_keypoints(
+        kp.to_string().as_bytes(),
+        std::path::Path::new("scene.json"),
+        &options,
+    )
+    .unwrap();
+    let posed = scene
+        .train
+        .hands
+        .pose_in_camera(&procedural_pair())
+        .unwrap();
+    for side in Side::BOTH {
+        let points = read.hand(side).unwrap();
+        assert_eq!(points.len(), 21);
+        for (k, j) in points.iter().zip(&posed.get(side).unwrap().joints) {
+            let q = scene.train.hands.camera.camera_to_pixel(*j).unwrap();
+            assert!((k.x - q.x).abs() < 1e-9 && (k.y - q.y).abs() < 1e-9);
+            assert_eq!(k.confidence, 1.0);
+        }
+    }
+    assert_eq!(
+        json["novel_poses"][0]["keypoints_2d"]["left"]
+            .as_array()
+            .map(Vec::len),
+        Some(21)
+    );
+
     // Missing folder.
     let e = SynthScene::read(&dir.join("nope")).unwrap_err().to_string();
     assert!(e.contains("nope") && e.contains("scene.json"), "{e}");

@@ -47,6 +47,28 @@ pub struct HandLayer {
     /// Rows of the flattened `[2V + 2*16, 3]` table (vertices then skeleton joints) that make
     /// the 21 output joints of each hand, `[2 * 21]`.
     output_rows: Tensor<1, Int>,
+    /// The fingertip vertices alone, for [`HandLayer::joints`].
+    tips: PointSet,
+    /// Rest skeleton joints of the mean shape `[2, 16, 3]` (the regressor on the template).
+    joint_template: Tensor<3>,
+    /// The regressor on the shape directions `[2, 48, 10]`.
+    joint_shape_dirs: Tensor<3>,
+    /// Rows of the flattened `[2*5 + 2*16, 3]` table (fingertips then skeleton joints) that
+    /// make the 21 output joints of each hand, `[2 * 21]`.
+    tip_rows: Tensor<1, Int>,
+}
+
+/// Points skinned by the layer: template, blend shapes and skinning weights of `P` vertices.
+#[derive(Debug, Clone)]
+struct PointSet {
+    /// `[2, P, 3]`
+    template: Tensor<3>,
+    /// `[2, 3P, 10]`
+    shape_dirs: Tensor<3>,
+    /// `[2, 3P, 135]`
+    pose_dirs: Tensor<3>,
+    /// `[2, P, 16]`
+    weights: Tensor<3>,
 }
 
 /// The parameters of both hands, batch index 0 = left, 1 = right.
@@ -120,14 +142,75 @@ impl HandLayer {
         // Output joints: skeleton joint j of hand h is row 2V + 16h + j, fingertip t of hand
         // h is vertex row hV + t.
         let mut rows = Vec::with_capacity(2 * NUM_OUTPUT_JOINTS);
+        let mut tip_rows = Vec::with_capacity(2 * NUM_OUTPUT_JOINTS);
         for (h, m) in [l, r].iter().enumerate() {
             for &i in &OUTPUT_JOINT_ORDER {
-                let row = if i < NUM_JOINTS {
-                    2 * v + h * NUM_JOINTS + i
+                let (row, tip_row) = if i < NUM_JOINTS {
+                    (2 * v + h * NUM_JOINTS + i, 2 * 5 + h * NUM_JOINTS + i)
                 } else {
-                    h * v + m.fingertips[i - NUM_JOINTS] as usize
+                    let t = i - NUM_JOINTS;
+                    (h * v + m.fingertips[t] as usize, h * 5 + t)
                 };
                 rows.push(row as i64);
+                tip_rows.push(tip_row as i64);
+            }
+        }
+        // The fingertip rows of every per-vertex array.
+        let per_tip = |f: &dyn Fn(&HandModel) -> Vec<f64>, width: usize| -> Vec<f32> {
+            let mut out = Vec::with_capacity(2 * 5 * width);
+            for m in [l, r] {
+                let all = f(m);
+                for &t in &m.fingertips {
+                    let t = t as usize;
+                    out.extend(all[t * width..(t + 1) * width].iter().map(|&x| x as f32));
+                }
+            }
+            out
+        };
+        let tips = PointSet {
+            template: tensor(
+                per_tip(
+                    &|m| m.v_template.iter().flat_map(|p| [p.x, p.y, p.z]).collect(),
+                    3,
+                ),
+                [2, 5, 3],
+                device,
+            ),
+            shape_dirs: tensor(
+                per_tip(&|m| m.shape_dirs.clone(), 3 * NUM_BETAS),
+                [2, 15, NUM_BETAS],
+                device,
+            ),
+            pose_dirs: tensor(
+                per_tip(&|m| m.pose_dirs.clone(), 3 * NUM_POSE_FEATURES),
+                [2, 15, NUM_POSE_FEATURES],
+                device,
+            ),
+            weights: tensor(
+                per_tip(&|m| m.skinning_weights.clone(), NUM_JOINTS),
+                [2, 5, NUM_JOINTS],
+                device,
+            ),
+        };
+        // The regressor applied to the template and to each shape direction (rows 3v + c of
+        // `shape_dirs` are vertex v, coordinate c).
+        let mut joint_template = Vec::with_capacity(2 * NUM_JOINTS * 3);
+        let mut joint_shape_dirs = Vec::with_capacity(2 * NUM_JOINTS * 3 * NUM_BETAS);
+        for m in [l, r] {
+            for j in 0..NUM_JOINTS {
+                let w = &m.joint_regressor[j * v..(j + 1) * v];
+                for c in 0..3 {
+                    let t: f64 = (0..v).map(|k| w[k] * m.v_template[k][c]).sum();
+                    joint_template.push(t as f32);
+                }
+                for c in 0..3 {
+                    for b in 0..NUM_BETAS {
+                        let d: f64 = (0..v)
+                            .map(|k| w[k] * m.shape_dirs[(3 * k + c) * NUM_BETAS + b])
+                            .sum();
+                        joint_shape_dirs.push(d as f32);
+                    }
+                }
             }
         }
         Ok(HandLayer {
@@ -141,6 +224,10 @@ impl HandLayer {
             pca_mean: tensor(mean, [2, NUM_POSE], device),
             parents: l.parents.clone(),
             output_rows: Tensor::from_data(TensorData::new(rows, [2 * NUM_OUTPUT_JOINTS]), device),
+            tips,
+            joint_template: tensor(joint_template, [2, NUM_JOINTS, 3], device),
+            joint_shape_dirs: tensor(joint_shape_dirs, [2, 3 * NUM_JOINTS, NUM_BETAS], device),
+            tip_rows: Tensor::from_data(TensorData::new(tip_rows, [2 * NUM_OUTPUT_JOINTS]), device),
         })
     }
 
@@ -177,7 +264,70 @@ impl HandLayer {
             .reshape([2, v, 3]);
         let v_shaped = self.v_template.clone() + offsets;
         let rest = self.regressor.clone().matmul(v_shaped.clone()); // [2, 16, 3]
+        let all = PointSet {
+            template: v_shaped,
+            shape_dirs: self.shape_dirs.clone(),
+            pose_dirs: self.pose_dirs.clone(),
+            weights: self.weights.clone(),
+        };
+        let (vertices, joints_all) = self.pose_points(p, rest, &all);
+        let table = Tensor::cat(
+            vec![
+                vertices.clone().reshape([2 * v, 3]),
+                joints_all.reshape([2 * j, 3]),
+            ],
+            0,
+        );
+        let joints = table
+            .select(0, self.output_rows.clone())
+            .reshape([2, NUM_OUTPUT_JOINTS, 3]);
+        HandLayerOutput { vertices, joints }
+    }
 
+    /// The 21 output joints alone, equal to [`HandLayer::forward`]'s `joints` but skinning
+    /// only the five fingertip vertices (the keypoint fit's forward pass).
+    ///
+    /// # Shapes
+    /// - `root_6d [2, 6]`, `finger_pose [2, 45]`, `betas [2, 10]`, `trans [2, 3]`
+    /// - output: `[2, 21, 3]`
+    pub fn joints(&self, p: &HandLayerParams) -> Tensor<3> {
+        let j = NUM_JOINTS;
+        let beta = p.betas.clone().reshape([2, NUM_BETAS, 1]);
+        let rest = self.joint_template.clone()
+            + self
+                .joint_shape_dirs
+                .clone()
+                .matmul(beta.clone())
+                .reshape([2, j, 3]);
+        let shaped = self.tips.template.clone()
+            + self.tips.shape_dirs.clone().matmul(beta).reshape([2, 5, 3]);
+        let tips = PointSet {
+            template: shaped,
+            ..self.tips.clone()
+        };
+        let (tip_points, joints_all) = self.pose_points(p, rest, &tips);
+        Tensor::cat(
+            vec![
+                tip_points.reshape([2 * 5, 3]),
+                joints_all.reshape([2 * j, 3]),
+            ],
+            0,
+        )
+        .select(0, self.tip_rows.clone())
+        .reshape([2, NUM_OUTPUT_JOINTS, 3])
+    }
+
+    /// Poses `points` (their `template` already shaped) with the kinematic chain of the rest
+    /// joints `rest [2, 16, 3]`: returns the posed points `[2, P, 3]` and the posed skeleton
+    /// joints `[2, 16, 3]`, both translated.
+    fn pose_points(
+        &self,
+        p: &HandLayerParams,
+        rest: Tensor<3>,
+        points: &PointSet,
+    ) -> (Tensor<3>, Tensor<3>) {
+        let j = NUM_JOINTS;
+        let n = points.template.dims()[1];
         // Local rotations: root from 6-D, fingers from axis-angles.
         let root = rotation_from_6d(p.root_6d.clone()); // [2, 3, 3]
         let fingers =
@@ -186,7 +336,8 @@ impl HandLayer {
         // Pose correctives from R_j - I (row-major), j = 1..15.
         let eye = Tensor::<2>::eye(3, &p.betas.device()).reshape([1, 1, 3, 3]);
         let features = (fingers.clone() - eye).reshape([2, NUM_POSE_FEATURES, 1]);
-        let v_posed = v_shaped + self.pose_dirs.clone().matmul(features).reshape([2, v, 3]);
+        let posed_rest =
+            points.template.clone() + points.pose_dirs.clone().matmul(features).reshape([2, n, 3]);
 
         // Kinematic chain: G_j = G_parent [R_j | J_j - J_parent], kept as (rotation, origin).
         let mut rot: Vec<Tensor<3>> = Vec::with_capacity(j);
@@ -218,31 +369,20 @@ impl HandLayer {
             .collect();
         let rot_all = Tensor::stack::<4>(rot, 1).reshape([2, j, 9]);
         let t_all = Tensor::cat(skin_t, 1).reshape([2, j, 3]);
-        let blended = self
+        let blended = points
             .weights
             .clone()
-            .matmul(Tensor::cat(vec![rot_all, t_all], 2)); // [2, V, 12]
-        let r = blended.clone().narrow(2, 0, 9).reshape([2, v, 3, 3]);
+            .matmul(Tensor::cat(vec![rot_all, t_all], 2)); // [2, P, 12]
+        let r = blended.clone().narrow(2, 0, 9).reshape([2, n, 3, 3]);
         let t = blended.narrow(2, 9, 3);
         let trans = p.trans.clone().reshape([2, 1, 3]);
-        let vertices = (r * v_posed.unsqueeze_dim::<4>(2))
+        let posed = (r * posed_rest.unsqueeze_dim::<4>(2))
             .sum_dim(3)
-            .reshape([2, v, 3])
+            .reshape([2, n, 3])
             + t
             + trans.clone();
-
         let joints_all = Tensor::cat(origin, 1).reshape([2, j, 3]) + trans; // [2, 16, 3]
-        let table = Tensor::cat(
-            vec![
-                vertices.clone().reshape([2 * v, 3]),
-                joints_all.reshape([2 * j, 3]),
-            ],
-            0,
-        );
-        let joints = table
-            .select(0, self.output_rows.clone())
-            .reshape([2, NUM_OUTPUT_JOINTS, 3]);
-        HandLayerOutput { vertices, joints }
+        (posed, joints_all)
     }
 }
 
@@ -422,11 +562,13 @@ mod tests {
         })
     }
 
-    /// Largest difference between the layer and the f64 forward pass (vertices, joints).
+    /// Largest difference between the layer and the f64 forward pass (vertices, joints, and
+    /// the joints of [`HandLayer::joints`]).
     pub(crate) fn layer_error(models: &HandPair, hands: &[HandParams; 2], device: &Device) -> f64 {
         let layer = HandLayer::new(models, device).unwrap();
         let params = HandLayerParams::from_host(models, [&hands[0], &hands[1]], device);
         let out = layer.forward(&params);
+        let joints_only = to_vec(layer.joints(&params));
         let (verts, joints) = (to_vec(out.vertices), to_vec(out.joints));
         let v = layer.num_vertices();
         let mut worst = 0.0f64;
@@ -440,8 +582,9 @@ mod tests {
             }
             for (i, p) in want.joints.iter().enumerate() {
                 for c in 0..3 {
-                    let got = f64::from(joints[(h * NUM_OUTPUT_JOINTS + i) * 3 + c]);
-                    worst = worst.max((got - p[c]).abs());
+                    let k = (h * NUM_OUTPUT_JOINTS + i) * 3 + c;
+                    worst = worst.max((f64::from(joints[k]) - p[c]).abs());
+                    worst = worst.max((f64::from(joints_only[k]) - p[c]).abs());
                 }
             }
         }

@@ -12,6 +12,8 @@
 //! - [`outputs`], [`run`]: the run folder (textures, renders, avatar, metrics, report).
 //! - [`hand_layer`]: the hand model as a differentiable burn function (both hands batched).
 //! - [`refine`]: mesh refinement of both hands against the photo through the renderer.
+//! - [`hand_priors`]: joint-angle, off-axis and penetration priors shared by `refine` and `fit`.
+//! - [`fit`]: both hands fitted to 2D keypoints (OpenPose, MediaPipe, plain JSON).
 //! - [`real`]: real data (an image + annotation pickle, InterHand2.6M scenes), real runs.
 
 pub mod assets;
@@ -21,7 +23,9 @@ pub mod checkpoint;
 pub mod config;
 mod error;
 pub mod evaluate;
+pub mod fit;
 pub mod hand_layer;
+pub mod hand_priors;
 pub mod input;
 pub mod losses;
 pub mod lpips;

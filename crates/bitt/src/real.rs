@@ -125,6 +125,16 @@ pub enum RealSource {
         /// The annotation pickle.
         annotation: PathBuf,
     },
+    /// An image and its 2D hand keypoints, the hands fitted to them (`bitt fit-hands`).
+    Keypoints {
+        /// The image.
+        image: PathBuf,
+        /// The keypoint file.
+        keypoints: PathBuf,
+        /// Whether the image was un-mirrored before the fit.
+        #[serde(default)]
+        mirrored: bool,
+    },
     /// A scene of InterHand2.6M.
     InterHand {
         /// Dataset root.
@@ -793,6 +803,77 @@ pub fn annotation_setup(
             source: RealSource::Annotation {
                 image: absolute(image),
                 annotation: absolute(annotation),
+            },
+            hands: hands.absolute(),
+            prior: prior.absolute(),
+            train: ViewRecord {
+                source: absolute(image),
+                ..ViewRecord::from(&view)
+            },
+            novel_views: Vec::new(),
+            novel_poses: Vec::new(),
+        },
+        scene: RealScene {
+            train: view,
+            novel_views: Vec::new(),
+            novel_poses: Vec::new(),
+        },
+        trainer,
+    })
+}
+
+/// A fresh real run from a photo whose hands were fitted to its keypoints
+/// ([`crate::fit::fit_photo`]; `fit.image` is the photo as fitted, `keypoints` the file).
+///
+/// # Errors
+/// A fit without both hands, hands outside the image; as [`real_trainer`].
+#[allow(clippy::too_many_arguments)]
+pub fn keypoint_setup(
+    fit: &crate::fit::PhotoFit,
+    image: &Path,
+    keypoints: &Path,
+    hands: &HandSource,
+    prior: &PriorSource,
+    config: TrainConfig,
+    cache: Option<&Path>,
+    refine: Option<MeshRefine<'_>>,
+    device: &Device,
+) -> Result<RealSetup, BittError> {
+    for side in Side::BOTH {
+        if fit.hands.hand(side).is_none() {
+            return Err(BittError::Invalid(format!(
+                "{}: the {side} hand has too few keypoints to be fitted; BiTT needs both hands",
+                keypoints.display()
+            )));
+        }
+    }
+    let models = fit.models.clone();
+    let mut view = prepare_view(
+        "train",
+        image,
+        fit.image.clone(),
+        &fit.hands,
+        &models,
+        config.nets.image_size,
+    )?;
+    let (trainer, refinement) = refined_real_trainer(
+        &view.image,
+        &mut view.hands,
+        models,
+        prior,
+        config,
+        cache,
+        refine,
+        device,
+    )?;
+    Ok(RealSetup {
+        refinement,
+        input: RealInput {
+            format: INPUT_FORMAT.into(),
+            source: RealSource::Keypoints {
+                image: absolute(image),
+                keypoints: absolute(keypoints),
+                mirrored: fit.mirrored,
             },
             hands: hands.absolute(),
             prior: prior.absolute(),

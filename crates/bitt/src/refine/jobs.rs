@@ -228,8 +228,48 @@ pub fn refine_photo(
     let what = format!("the camera of {}", annotation.display());
     let pixels = read_image(image, &scene.camera, &what)?;
     let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
+    let mask = match mask {
+        Some(m) => Some((read_mask(m, [h, w])?, m.to_path_buf())),
+        None => None,
+    };
+    let models = load_models(hands, prior)?;
+    refine_photo_hands(
+        image, pixels, &scene, mask, models, prior, train, size, config, cache, device, observer,
+    )
+}
+
+/// [`refine_photo`] on hands and a photo already in memory: `pixels` `[3, H, W]` at the
+/// hands' camera size (`image` names the photo in messages), `mask` an `[H, W]` hand mask and
+/// its file (else the threshold rule).
+///
+/// # Errors
+/// As [`refine_photo`].
+#[allow(clippy::too_many_arguments)]
+pub fn refine_photo_hands(
+    image: &Path,
+    pixels: Vec<f32>,
+    scene: &TwoHandScene,
+    mask: Option<(Vec<f32>, std::path::PathBuf)>,
+    models: HandPair,
+    prior: &PriorSource,
+    train: &TrainConfig,
+    size: usize,
+    config: &RefineConfig,
+    cache: Option<&Path>,
+    device: &Device,
+    observer: &mut dyn RefineObserver,
+) -> Result<PhotoRefinement, BittError> {
+    let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
+    if pixels.len() != 3 * w * h {
+        return Err(BittError::Invalid(format!(
+            "{}: the photo has {} values, the hands' camera is for a {w}x{h} image",
+            image.display(),
+            pixels.len()
+        )));
+    }
+    let given_mask = mask.is_some();
     let (full_mask, mask_source) = match mask {
-        Some(m) => (read_mask(m, [h, w])?, m.display().to_string()),
+        Some((m, path)) => (m, path.display().to_string()),
         None => (
             threshold_mask(&pixels, h * w, MASK_THRESHOLD),
             format!("mean RGB above {MASK_THRESHOLD}"),
@@ -237,17 +277,16 @@ pub fn refine_photo(
     };
     if !full_mask.iter().any(|&m| m > 0.5) {
         return Err(BittError::Invalid(format!(
-            "{}: the hand mask is empty (no pixel is hand), so there is nothing to fit to",
-            mask.unwrap_or(image).display()
+            "{} ({mask_source}): the hand mask is empty (no pixel is hand), so there is              nothing to fit to",
+            image.display()
         )));
     }
-    let models = load_models(hands, prior)?;
-    let b = hands_in_image(&scene, &models, image)?;
+    let b = hands_in_image(scene, &models, image)?;
     // The fit sees the threshold mask without its specks (point lights); it is scored
     // against the mask as the rule gives it.
-    let fit_mask = match mask {
-        Some(_) => full_mask.clone(),
-        None => drop_small_components(&full_mask, [h, w], SPECK_FRACTION),
+    let fit_mask = match given_mask {
+        true => full_mask.clone(),
+        false => drop_small_components(&full_mask, [h, w], SPECK_FRACTION),
     };
     let view = ImageInput {
         image: pixels.clone(),
@@ -280,14 +319,14 @@ pub fn refine_photo(
         Ok(mask_iou(&silhouette(models, s, &assets.scene)?, &full_mask))
     };
     Ok(PhotoRefinement {
-        iou_before: iou(&scene)?,
+        iou_before: iou(scene)?,
         iou_after: iou(&refinement.hands)?,
         mask_source,
         overlay: overlay(
             &pixels,
             models,
             &assets.scene,
-            &scene,
+            scene,
             &refinement.hands,
             overlay_scale(w),
         )?,

@@ -39,13 +39,14 @@ use crate::BittError;
 use crate::assets::HandAssets;
 use crate::config::OptimConfig;
 use crate::hand_layer::{HandLayer, HandLayerParams, has_learned_pose_pca, host_params};
+use crate::hand_priors::HandPriors;
 use crate::metrics::mask_iou;
 use crate::optim::Adam;
 use crate::pipeline::point_light;
 
 pub use jobs::{
     HANDS_JSON, PhotoRefinement, SceneRefinement, check_refine_out, read_mask, refine_photo,
-    refine_scene, write_refine_outputs,
+    refine_photo_hands, refine_scene, write_refine_outputs,
 };
 
 /// Weights of the refinement loss terms.
@@ -552,43 +553,6 @@ pub fn distance_to_mask(mask: &[f32], [h, w]: [usize; 2]) -> Vec<f32> {
     g.into_iter().map(|d| d.sqrt() as f32).collect()
 }
 
-/// The 20 bones of the 21 output joints (child, parent): each finger's chain from the wrist.
-fn bones() -> Vec<(usize, usize)> {
-    let mut b = Vec::new();
-    for f in 0..5 {
-        for k in 0..4 {
-            let child = 1 + 4 * f + k;
-            let parent = if k == 0 { 0 } else { child - 1 };
-            b.push((child, parent));
-        }
-    }
-    b
-}
-
-/// Unit flexion axis of each finger joint, from the model's mean pose (zero where the mean
-/// pose does not bend the joint), `[45]`.
-fn flexion_axes(models: &HandPair) -> Vec<f32> {
-    let mut axes = Vec::with_capacity(2 * NUM_POSE);
-    for side in Side::BOTH {
-        let mean = &models.get(side).pose_pca_mean;
-        for j in 0..15 {
-            let a = DVec3::new(mean[3 * j], mean[3 * j + 1], mean[3 * j + 2]);
-            let u = if a.length() > 1e-3 {
-                a.normalize()
-            } else {
-                DVec3::ZERO
-            };
-            axes.extend([u.x as f32, u.y as f32, u.z as f32]);
-        }
-    }
-    axes
-}
-
-/// Joint-angle limits: flexion between these (radians) about each joint's flexion axis, and
-/// at most `OFF_AXIS_LIMIT` of rotation about other axes.
-const FLEXION_RANGE: (f32, f32) = (-0.4, 2.0);
-const OFF_AXIS_LIMIT: f32 = 0.8;
-
 /// Whether hand `side` of `params` gives PCA coefficients that its model cannot interpret
 /// (a model without a learned pose PCA: the coefficients are meant for MANO's basis).
 fn uninterpretable_pca(models: &HandPair, side: Side, params: &HandParams) -> bool {
@@ -731,13 +695,7 @@ pub fn refine_hands(
     let coverage_radius = config.coverage_radius * scale_px;
     let mask_pixels: Vec<usize> = (0..hw).filter(|&p| target.mask[p] > 0.5).collect();
 
-    // Priors' constants.
-    let axes = float(flexion_axes(models), [2, 15, 3], device);
-    let bone_list = bones();
-    let child: Vec<i64> = bone_list.iter().map(|b| b.0 as i64).collect();
-    let parent: Vec<i64> = bone_list.iter().map(|b| b.1 as i64).collect();
-    let child = Tensor::<1, Int>::from_data(TensorData::new(child, [20]), device);
-    let parent = Tensor::<1, Int>::from_data(TensorData::new(parent, [20]), device);
+    let priors = HandPriors::new(models, device);
 
     let k_tex = match appearance {
         Appearance::Prior(p) => p.basis.dims()[1],
@@ -915,33 +873,9 @@ pub fn refine_hands(
             // Priors.
             let dpose = params.finger_pose.clone() - pose0.clone();
             let pose_prior = (dpose.square() * prior_scale.clone()).mean();
-            let aa = params.finger_pose.clone().reshape([2, 15, 3]);
-            let along = (aa.clone() * axes.clone()).sum_dim(2); // [2, 15, 1]
-            let off = aa - axes.clone() * along.clone();
-            let off_len = (off.square().sum_dim(2) + 1e-12).sqrt();
-            let limits = ((along.clone().neg() + FLEXION_RANGE.0)
-                .clamp_min(0.0)
-                .square()
-                + (along - FLEXION_RANGE.1).clamp_min(0.0).square()
-                + (off_len - OFF_AXIS_LIMIT).clamp_min(0.0).square())
-            .sum();
+            let limits = priors.limits(params.finger_pose.clone()).sum();
             let shape = params.betas.clone().square().mean();
-            let penetration = {
-                let j = out.joints.clone(); // [2, 21, 3]
-                let points = |hand: usize| {
-                    let jh = j.clone().narrow(0, hand, 1).reshape([21, 3]);
-                    let mid = (jh.clone().select(0, child.clone())
-                        + jh.clone().select(0, parent.clone()))
-                        * 0.5;
-                    Tensor::cat(vec![jh, mid], 0) // [41, 3]
-                };
-                let (a, b) = (points(0), points(1));
-                let d2 = a.clone().square().sum_dim(1) + b.clone().square().sum_dim(1).transpose()
-                    - a.matmul(b.transpose()) * 2.0;
-                let d = (d2.clamp_min(0.0) + 1e-12).sqrt();
-                let rad = config.joint_radius;
-                ((d.neg() + 2.0 * rad).clamp_min(0.0) / rad).square().sum()
-            };
+            let penetration = priors.penetration(out.joints.clone(), config.joint_radius);
 
             let parts = [
                 (wts.silhouette, silhouette),
@@ -1147,10 +1081,14 @@ fn hand_labels(
     let posed = hands.pose_in_camera(models)?;
     let mut pts = Vec::new();
     for side in Side::BOTH {
-        let p = posed
-            .get(side)
-            .ok_or_else(|| BittError::Invalid(format!("the {side} hand is missing")))?;
-        pts.extend_from_slice(&p.vertices);
+        match posed.get(side) {
+            Some(p) => pts.extend_from_slice(&p.vertices),
+            // A missing hand is put behind the camera, where nothing of it is drawn.
+            None => pts.extend(std::iter::repeat_n(
+                DVec3::new(0.0, 0.0, -1.0),
+                models.get(side).num_vertices(),
+            )),
+        }
     }
     let camera = Camera::Pinhole(PinholeCamera {
         rotation: bitt_mesh::glam::DMat3::IDENTITY,
@@ -1200,7 +1138,33 @@ pub fn overlay(
     after: &TwoHandScene,
     scale: usize,
 ) -> Result<(Vec<f32>, [usize; 2]), BittError> {
-    let (w, h) = (before.camera.width as usize, before.camera.height as usize);
+    outlines(
+        image,
+        models,
+        scene,
+        &[(before, [1.0, 0.15, 0.1]), (after, [0.1, 1.0, 0.2])],
+        scale,
+    )
+}
+
+/// The photo `[3, H, W]` enlarged `scale` times (nearest) with the outline of each hand's
+/// visible region of every scene drawn over it in its colour (later ones on top); returns
+/// the image and its `[H, W]`. Every scene must have the photo's camera; a missing hand is
+/// not drawn.
+///
+/// # Errors
+/// When a hand cannot be posed or the image does not match the camera.
+pub fn outlines(
+    image: &[f32],
+    models: &HandPair,
+    scene: &bitt_render::scene::Scene,
+    drawn: &[(&TwoHandScene, [f32; 3])],
+    scale: usize,
+) -> Result<(Vec<f32>, [usize; 2]), BittError> {
+    let Some((first, _)) = drawn.first() else {
+        return Err(BittError::Invalid("overlay: nothing to draw".into()));
+    };
+    let (w, h) = (first.camera.width as usize, first.camera.height as usize);
     if image.len() != 3 * w * h {
         return Err(BittError::Invalid(format!(
             "overlay: the image has {} values, the camera is {w}x{h}",
@@ -1226,7 +1190,7 @@ pub fn overlay(
         t.camera.height = bh as u32;
         t
     };
-    for (hands, colour) in [(before, [1.0, 0.15, 0.1]), (after, [0.1, 1.0, 0.2])] {
+    for (hands, colour) in drawn {
         let labels = hand_labels(models, &big(hands), scene)?;
         for y in 0..bh {
             for x in 0..bw {

@@ -1,0 +1,521 @@
+//! `bitt fit-hands`: fit both hands to a photo's 2D keypoints (OpenPose, MediaPipe or plain
+//! JSON); writes `hands.json`, `fit.json` and `overlay.png`. With `--scene`, the same fit on
+//! synthetic scenes from their noisy true keypoints, scored against the true hands.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use bitt::fit::{
+    FitConfig, FitObserver, FitProgress, FitScores, KeypointSource, check_fit_out, fit_keypoints,
+    fit_photo, parse_intrinsics, score_fit, synthetic_keypoints, write_fit_outputs,
+};
+use bitt_mesh::PinholeCamera;
+use bitt_mesh::keypoints::KeypointFormat;
+use bitt_nets::Preset;
+use bitt_synth::SynthScene;
+
+use crate::device::DeviceName;
+use crate::refine_hands::{RefineBar, refine_config};
+use crate::train_scene::{HandsArgs, training_config};
+
+/// Keypoint file formats.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum FormatArg {
+    /// OpenPose `--write_json` (`people[0].hand_left/right_keypoints_2d`).
+    Openpose,
+    /// MediaPipe HandLandmarker results saved as JSON (Python or JS field names).
+    Mediapipe,
+    /// `{"left": [[x, y, c], ...], "right": [...]}` in OpenPose order, pixels.
+    Plain,
+}
+
+impl From<FormatArg> for KeypointFormat {
+    fn from(f: FormatArg) -> Self {
+        match f {
+            FormatArg::Openpose => KeypointFormat::OpenPose,
+            FormatArg::Mediapipe => KeypointFormat::MediaPipe,
+            FormatArg::Plain => KeypointFormat::Plain,
+        }
+    }
+}
+
+/// The keypoint options shared with `train-scene`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct KeypointArgs {
+    /// The keypoint file's format (default: guessed from its content).
+    #[arg(long, value_enum, requires = "keypoints")]
+    pub format: Option<FormatArg>,
+    /// The photo is a mirrored selfie (as a front camera shows it): photo, keypoints and mask
+    /// are flipped left-right before the fit, so each hand gets its own side's model.
+    /// Default: an ordinary photo. (MediaPipe names hands as if every image were mirrored;
+    /// its labels are read accordingly either way.)
+    #[arg(long, requires = "keypoints")]
+    pub mirrored: bool,
+    /// Camera intrinsics `fx,fy,cx,cy` in pixels of the photo. Default: focal length = the
+    /// image diagonal, principal point at the centre.
+    #[arg(long, requires = "keypoints")]
+    pub intrinsics: Option<String>,
+    /// A keypoint-fit configuration (JSON, the `report.config` of a `fit.json`, edited).
+    #[arg(long)]
+    pub fit_config: Option<PathBuf>,
+}
+
+impl KeypointArgs {
+    /// The source of keypoint file `path`.
+    pub fn source(&self, path: &Path) -> KeypointSource {
+        KeypointSource {
+            path: path.to_path_buf(),
+            format: self.format.map(Into::into),
+            mirrored: self.mirrored,
+        }
+    }
+
+    /// The intrinsics of `--intrinsics`.
+    pub fn intrinsics(&self) -> Result<Option<[f64; 4]>> {
+        Ok(match &self.intrinsics {
+            Some(t) => Some(parse_intrinsics(t)?),
+            None => None,
+        })
+    }
+
+    /// The fit configuration.
+    pub fn config(&self) -> Result<FitConfig> {
+        let config: FitConfig = match &self.fit_config {
+            Some(path) => {
+                let text = std::fs::read_to_string(path)
+                    .with_context(|| format!("reading {}", path.display()))?;
+                serde_json::from_str(&text).with_context(|| {
+                    format!("{}: not a keypoint-fit configuration", path.display())
+                })?
+            }
+            None => FitConfig::default(),
+        };
+        config.validate()?;
+        Ok(config)
+    }
+}
+
+/// Arguments of `bitt fit-hands`.
+#[derive(Debug, clap::Args)]
+pub struct FitHandsArgs {
+    /// A photo of two interacting hands (with --keypoints).
+    #[arg(long, requires = "keypoints", conflicts_with = "scene")]
+    pub image: Option<PathBuf>,
+    /// The photo's 2D hand keypoints: OpenPose JSON, MediaPipe HandLandmarker JSON or plain
+    /// JSON (see docs/keypoints.md).
+    #[arg(long, requires = "image")]
+    pub keypoints: Option<PathBuf>,
+    /// Keypoint format, mirroring, intrinsics and fit configuration.
+    #[command(flatten)]
+    pub keypoint: KeypointArgs,
+    /// The photo's hand mask (white = hand, the photo's size): after the keypoint fit, the
+    /// hands are refined against it (the silhouette refinement of `bitt refine-hands`).
+    #[arg(long, requires = "image")]
+    pub mask: Option<PathBuf>,
+    /// A refinement configuration (JSON) for --mask.
+    #[arg(long, requires = "mask")]
+    pub refine_config: Option<PathBuf>,
+    /// Synthetic scene folders (`bitt synth`), repeatable: fit each training view's true 2D
+    /// joints (from `scene.json`) with noise and dropped points, and score the fit against
+    /// the true hands (2D joint error, root-relative 3D joint error, fingers bent backwards).
+    #[arg(long, num_args = 1..)]
+    pub scene: Vec<PathBuf>,
+    /// Synthetic: Gaussian noise (pixels) added to each keypoint coordinate.
+    #[arg(long, default_value_t = 2.0)]
+    pub noise_px: f64,
+    /// Synthetic: fraction of the 42 keypoints dropped.
+    #[arg(long, default_value_t = 0.1)]
+    pub drop: f64,
+    /// Synthetic: seed of the noise and of the dropped points.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Synthetic: fit with the default intrinsics (focal = image diagonal, centred) instead
+    /// of the scene's true ones.
+    #[arg(long)]
+    pub default_intrinsics: bool,
+    /// The hand models (and, with --mask, the texture prior of the refinement).
+    #[command(flatten)]
+    pub hands: HandsArgs,
+    /// Preset whose texture prior the --mask refinement uses.
+    #[arg(long, default_value = "quick")]
+    pub preset: Preset,
+    /// Backend.
+    #[arg(long, value_enum, default_value = "flex")]
+    pub device: DeviceName,
+    /// Output folder.
+    #[arg(long, default_value = "runs/fit-hands")]
+    pub out: PathBuf,
+    /// Cache folder for the fitted texture PCA (--mask).
+    #[arg(long, default_value = "runs/cache")]
+    pub cache: PathBuf,
+}
+
+/// A redrawn one-line bar on a terminal, plain lines every 50 iterations otherwise.
+pub(crate) struct FitBar {
+    started: Instant,
+    terminal: bool,
+    quiet: bool,
+}
+
+impl FitBar {
+    pub(crate) fn new() -> Self {
+        use std::io::IsTerminal;
+        FitBar {
+            started: Instant::now(),
+            terminal: std::io::stderr().is_terminal(),
+            quiet: false,
+        }
+    }
+
+    fn quiet() -> Self {
+        FitBar {
+            quiet: true,
+            ..Self::new()
+        }
+    }
+}
+
+impl FitObserver for FitBar {
+    fn iteration(&mut self, p: &FitProgress) {
+        if self.quiet {
+            return;
+        }
+        let width = 30;
+        let filled = (width * p.iteration / p.iterations.max(1)).min(width);
+        let line = format!(
+            "fit [{}{}] {}/{} {:10} loss {:.4} {:.1} s",
+            "#".repeat(filled),
+            "-".repeat(width - filled),
+            p.iteration,
+            p.iterations,
+            p.stage,
+            p.loss,
+            self.started.elapsed().as_secs_f64()
+        );
+        if self.terminal {
+            eprint!("\r{line}   ");
+        } else if p.iteration.is_multiple_of(50) || p.iteration == 1 {
+            eprintln!("{line}");
+        }
+        let _ = std::io::stderr().flush();
+    }
+}
+
+/// One synthetic scene's result.
+#[derive(Debug, serde::Serialize)]
+struct SceneResult {
+    scene: String,
+    scores: FitScores,
+    residual_px: f64,
+    seconds: f64,
+    dropped: usize,
+    notes: Vec<String>,
+    hands: Vec<bitt::fit::HandFitReport>,
+}
+
+fn run_scenes(args: &FitHandsArgs, config: &FitConfig) -> Result<()> {
+    if args.hands.model_dir.is_some() {
+        bail!("--scene fits a synthetic scene's procedural hands: drop --model-dir");
+    }
+    if args.keypoint.intrinsics.is_some() {
+        bail!(
+            "--scene uses the scene's true intrinsics or, with --default-intrinsics, the default"
+        );
+    }
+    let device = args.device.device()?.autodiff();
+    let models = bitt_mesh::procedural_pair();
+    let mut results = Vec::new();
+    for dir in &args.scene {
+        let scene = SynthScene::read(dir).with_context(|| format!("--scene {}", dir.display()))?;
+        let kp = synthetic_keypoints(&scene, args.noise_px, args.drop, args.seed)?;
+        let truth = scene.train.hands.camera;
+        let camera = if args.default_intrinsics {
+            PinholeCamera {
+                intrinsics: PinholeCamera::default_for_image(truth.width, truth.height)?.intrinsics,
+                ..truth
+            }
+        } else {
+            truth
+        };
+        let fit = fit_keypoints(
+            &models,
+            &kp.keypoints,
+            &camera,
+            config,
+            &device,
+            &mut FitBar::quiet(),
+        )
+        .with_context(|| format!("fitting --scene {}", dir.display()))?;
+        let scores = score_fit(&fit, &scene, &camera)?;
+        let residual = fit
+            .report
+            .hands
+            .iter()
+            .map(|h| h.mean_residual_px)
+            .sum::<f64>()
+            / fit.report.hands.len().max(1) as f64;
+        println!(
+            "{}: 2D joints {:.2} px, root-relative 3D {:.1} mm (max {:.1}), min flexion {:.0} deg ({} bent backwards), {:.1} s",
+            dir.display(),
+            scores.joint_2d_px,
+            scores.joint_3d_mm,
+            scores.max_joint_3d_mm,
+            scores.min_flexion_deg,
+            scores.bent_backwards,
+            fit.report.seconds
+        );
+        results.push(SceneResult {
+            scene: dir.display().to_string(),
+            scores,
+            residual_px: residual,
+            seconds: fit.report.seconds,
+            dropped: kp.dropped,
+            notes: fit.report.notes,
+            hands: fit.report.hands,
+        });
+    }
+    let n = results.len() as f64;
+    let mean = |f: &dyn Fn(&SceneResult) -> f64| results.iter().map(f).sum::<f64>() / n;
+    let summary = serde_json::json!({
+        "scenes": results.len(),
+        "noise_px": args.noise_px,
+        "drop": args.drop,
+        "seed": args.seed,
+        "intrinsics": if args.default_intrinsics { "default" } else { "true" },
+        "mean_joint_2d_px": mean(&|r| r.scores.joint_2d_px),
+        "mean_joint_3d_mm": mean(&|r| r.scores.joint_3d_mm),
+        "max_joint_3d_mm": results.iter().map(|r| r.scores.max_joint_3d_mm).fold(0.0, f64::max),
+        "bent_backwards": results.iter().map(|r| r.scores.bent_backwards).sum::<usize>(),
+        "min_flexion_deg": results.iter().map(|r| r.scores.min_flexion_deg).fold(f64::INFINITY, f64::min),
+        "mean_seconds": mean(&|r| r.seconds),
+        "max_seconds": results.iter().map(|r| r.seconds).fold(0.0, f64::max),
+        "config": config,
+        "per_scene": results,
+    });
+    println!(
+        "mean over {} scenes: 2D joints {:.2} px, root-relative 3D {:.1} mm, {} joints bent backwards, {:.1} s per fit ({} intrinsics)",
+        results.len(),
+        summary["mean_joint_2d_px"].as_f64().unwrap_or(f64::NAN),
+        summary["mean_joint_3d_mm"].as_f64().unwrap_or(f64::NAN),
+        summary["bent_backwards"],
+        summary["mean_seconds"].as_f64().unwrap_or(f64::NAN),
+        if args.default_intrinsics {
+            "default"
+        } else {
+            "true"
+        }
+    );
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let path = args.out.join("fit-eval.json");
+    bitt::outputs::write_json(&path, &summary)?;
+    println!("wrote {}", path.display());
+    Ok(())
+}
+
+/// `bitt fit-hands`.
+pub fn run(args: &FitHandsArgs) -> Result<()> {
+    let config = args.keypoint.config()?;
+    if !args.scene.is_empty() {
+        return run_scenes(args, &config);
+    }
+    let (Some(image), Some(keypoints)) = (&args.image, &args.keypoints) else {
+        bail!("give --image IMG --keypoints FILE, or --scene DIR...");
+    };
+    check_fit_out(&args.out)?;
+    let device = args.device.device()?.autodiff();
+    let (hands, prior) = args.hands.sources();
+    let refine = match &args.mask {
+        Some(_) => Some((
+            training_config(None, args.preset)?,
+            refine_config(args.refine_config.as_deref(), None, None)?,
+        )),
+        None => None,
+    };
+    let mut refine_bar = RefineBar::new();
+    let done = fit_photo(
+        image,
+        &args.keypoint.source(keypoints),
+        args.keypoint.intrinsics()?,
+        args.mask.as_deref(),
+        &hands,
+        &prior,
+        &config,
+        refine.as_ref().map(|(t, r)| {
+            (
+                t,
+                r,
+                &mut refine_bar as &mut dyn bitt::refine::RefineObserver,
+            )
+        }),
+        Some(args.cache.as_path()),
+        &device,
+        &mut FitBar::new(),
+    )
+    .with_context(|| {
+        format!(
+            "fitting --image {} --keypoints {}",
+            image.display(),
+            keypoints.display()
+        )
+    })?;
+    eprintln!();
+    write_fit_outputs(&args.out, &done)?;
+    for n in &done.fit.report.notes {
+        println!("note: {n}");
+    }
+    println!("camera: {}", done.camera_source);
+    for h in &done.fit.report.hands {
+        println!(
+            "{} hand: {} keypoints, residual {:.2} px mean ({:.2} max), wrist at {:.3} m",
+            h.side, h.keypoints, h.mean_residual_px, h.max_residual_px, h.wrist_depth_m
+        );
+    }
+    if let Some(r) = &done.refinement {
+        println!(
+            "mask refinement: silhouette IoU {:.4} -> {:.4}",
+            r.iou_before, r.iou_after
+        );
+    }
+    println!(
+        "fitted in {:.1} s; wrote {out}/hands.json (use it as --annotation), {out}/fit.json and {out}/overlay.png",
+        done.fit.report.seconds,
+        out = args.out.display()
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bitt_mesh::glam::DVec3;
+    use bitt_mesh::keypoints::{Keypoint, TwoHandKeypoints};
+    use bitt_mesh::{HandParams, HandPose, Side};
+    use bitt_tests::real_fixture::{scratch, write_image};
+    use clap::Parser;
+
+    #[derive(Debug, Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: FitHandsArgs,
+    }
+
+    fn args(extra: &[String]) -> FitHandsArgs {
+        let mut all = vec!["bitt".to_string()];
+        all.extend_from_slice(extra);
+        Cli::try_parse_from(all).unwrap().args
+    }
+
+    fn s(p: &Path) -> String {
+        p.to_str().unwrap().to_string()
+    }
+
+    /// Both procedural hands in front of the default camera of a 256-pixel photo, projected.
+    fn plain_keypoints() -> String {
+        let models = bitt_mesh::procedural_pair();
+        let camera = PinholeCamera::default_for_image(256, 256).unwrap();
+        let hand = |side: Side, rot: DVec3, x: f64| {
+            let p = HandParams {
+                root_rotation: bitt_mesh::lbs::rodrigues(rot),
+                pose: HandPose::Pca(vec![0.0; 45]),
+                betas: vec![0.0; 10],
+                trans: DVec3::new(x, 0.0, 0.6),
+            };
+            models
+                .get(side)
+                .forward(&p)
+                .unwrap()
+                .joints
+                .iter()
+                .map(|j| {
+                    let q = camera.camera_to_pixel(*j).unwrap();
+                    Keypoint {
+                        x: q.x,
+                        y: q.y,
+                        confidence: 0.9,
+                    }
+                })
+                .collect()
+        };
+        TwoHandKeypoints {
+            left: Some(hand(Side::Left, DVec3::new(0.2, 1.0, 0.1), -0.05)),
+            right: Some(hand(Side::Right, DVec3::new(-0.2, -1.0, 0.3), 0.06)),
+            format: KeypointFormat::Plain,
+            notes: Vec::new(),
+        }
+        .to_plain_json()
+    }
+
+    /// A photo with its keypoints fits and writes the three files; `hands.json` is an
+    /// annotation again. Malformed keypoints, a mask of the wrong size and a foreign output
+    /// folder are clear errors that write nothing.
+    #[test]
+    fn photo_fits_and_bad_inputs_leave_nothing() {
+        let dir = scratch("cli-fit");
+        let (img, kp) = (dir.join("photo.png"), dir.join("kp.json"));
+        write_image(&img, 256, 256, None);
+        std::fs::write(&kp, plain_keypoints()).unwrap();
+        let out = dir.join("out");
+        let common = |keypoints: &Path, out: &Path| {
+            vec![
+                "--image".to_string(),
+                s(&img),
+                "--keypoints".into(),
+                s(keypoints),
+                "--out".into(),
+                s(out),
+                "--cache".into(),
+                s(&dir.join("cache")),
+            ]
+        };
+        run(&args(&common(&kp, &out))).unwrap();
+        for f in ["hands.json", "fit.json", "overlay.png"] {
+            assert!(out.join(f).is_file(), "{f} missing");
+        }
+        let record: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("fit.json")).unwrap()).unwrap();
+        let hands = record["report"]["hands"].as_array().unwrap();
+        assert_eq!(hands.len(), 2);
+        for h in hands {
+            assert!(h["mean_residual_px"].as_f64().unwrap() < 1.5, "{h}");
+            assert_eq!(h["residual_px"].as_array().unwrap().len(), 21);
+        }
+        let scene = bitt_mesh::load_bitt_annotation(&out.join("hands.json"), (256, 256)).unwrap();
+        assert!(scene.left.is_some() && scene.right.is_some());
+        // Rerunning into its own folder is fine.
+        run(&args(&common(&kp, &out))).unwrap();
+
+        let bad_out = dir.join("bad");
+        let short = dir.join("short.json");
+        std::fs::write(&short, r#"{"left": [[1, 2, 1], [3, 4, 1]]}"#).unwrap();
+        let e = format!("{:#}", run(&args(&common(&short, &bad_out))).unwrap_err());
+        assert!(e.contains("short.json") && e.contains("left"), "{e}");
+        let small = dir.join("small.png");
+        write_image(&small, 100, 80, None);
+        let mut a = common(&kp, &bad_out);
+        a.extend(["--mask".into(), s(&small)]);
+        let e = format!("{:#}", run(&args(&a)).unwrap_err());
+        assert!(e.contains("small.png") && e.contains("100x80"), "{e}");
+        let mut a = common(&kp, &bad_out);
+        a.extend(["--intrinsics".into(), "600,600".into()]);
+        let e = format!("{:#}", run(&args(&a)).unwrap_err());
+        assert!(e.contains("--intrinsics"), "{e}");
+        assert!(
+            !bad_out.exists(),
+            "a failed fit wrote {}",
+            bad_out.display()
+        );
+        let foreign = dir.join("foreign");
+        std::fs::create_dir_all(&foreign).unwrap();
+        std::fs::write(foreign.join("notes.txt"), "mine").unwrap();
+        let e = format!("{:#}", run(&args(&common(&kp, &foreign))).unwrap_err());
+        assert!(e.contains("not a fit-hands output"), "{e}");
+        assert_eq!(
+            std::fs::read_to_string(foreign.join("notes.txt")).unwrap(),
+            "mine"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

@@ -1,0 +1,169 @@
+//! The keypoint fit on synthetic scenes, where the true joints and camera are known: noisy
+//! keypoints from the true 2D joints (`keypoints_2d` of `scene.json`) and the fit's scores.
+
+use bitt_mesh::glam::DVec2;
+use bitt_mesh::keypoints::{NUM_KEYPOINTS, TwoHandKeypoints};
+use bitt_mesh::{PinholeCamera, Side, procedural_pair};
+use bitt_synth::SynthScene;
+use bitt_texture::procedural::noise::SplitMix64;
+
+use super::KeypointFit;
+use crate::BittError;
+use crate::hand_priors::{FLEXION_RANGE, flexion_angles, flexion_axes};
+
+/// The training view's true 2D joints with noise and dropped points.
+#[derive(Debug, Clone)]
+pub struct SyntheticKeypoints {
+    /// What the fit gets.
+    pub keypoints: TwoHandKeypoints,
+    /// Points dropped (confidence 0).
+    pub dropped: usize,
+}
+
+/// The true 2D joints of `scene`'s training view (both hands, pixels) with Gaussian noise of
+/// `noise_px` pixels per coordinate and `round(drop * 42)` points dropped, seeded.
+///
+/// # Errors
+/// A `drop` outside 0-1, a negative noise, or hands that cannot be posed.
+pub fn synthetic_keypoints(
+    scene: &SynthScene,
+    noise_px: f64,
+    drop: f64,
+    seed: u64,
+) -> Result<SyntheticKeypoints, BittError> {
+    if !((0.0..=1.0).contains(&drop) && noise_px.is_finite() && noise_px >= 0.0) {
+        return Err(BittError::Invalid(format!(
+            "keypoint noise must be >= 0 px and the dropped fraction within 0-1 (got {noise_px} \
+             px, {drop})"
+        )));
+    }
+    let mut kp = scene.train.keypoints_2d()?;
+    let mut rng = SplitMix64::new(seed ^ 0x4B45_5950_4F49_4E54);
+    for side in Side::BOTH {
+        let hand = match side {
+            Side::Left => kp.left.as_mut(),
+            Side::Right => kp.right.as_mut(),
+        };
+        for p in hand.into_iter().flatten() {
+            p.x += noise_px * rng.normal();
+            p.y += noise_px * rng.normal();
+        }
+    }
+    // Exactly round(drop * n) points, chosen by a seeded shuffle.
+    let n = 2 * NUM_KEYPOINTS;
+    let mut order: Vec<usize> = (0..n).collect();
+    for i in (1..n).rev() {
+        let j = (rng.next_u64() % (i as u64 + 1)) as usize;
+        order.swap(i, j);
+    }
+    let dropped = (drop * n as f64).round() as usize;
+    for &i in &order[..dropped] {
+        let hand = if i < NUM_KEYPOINTS {
+            kp.left.as_mut()
+        } else {
+            kp.right.as_mut()
+        };
+        if let Some(h) = hand {
+            let p = &mut h[i % NUM_KEYPOINTS];
+            *p = bitt_mesh::keypoints::Keypoint {
+                x: 0.0,
+                y: 0.0,
+                confidence: 0.0,
+            };
+        }
+    }
+    Ok(SyntheticKeypoints {
+        keypoints: kp,
+        dropped,
+    })
+}
+
+/// A fit's scores against a synthetic scene's true training hands.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FitScores {
+    /// Mean distance (pixels) between the fitted joints' projections (with the fit's
+    /// camera) and the true 2D joints, over all 42 joints (dropped ones included).
+    pub joint_2d_px: f64,
+    /// Mean root-relative 3D joint error (millimetres, camera frame; each hand's wrist at the
+    /// origin), over the 40 non-wrist joints.
+    pub joint_3d_mm: f64,
+    /// The largest root-relative 3D joint error (millimetres).
+    pub max_joint_3d_mm: f64,
+    /// Smallest fitted finger flexion (degrees; negative is bent backwards).
+    pub min_flexion_deg: f64,
+    /// Fitted finger joints bent backwards beyond the limit.
+    pub bent_backwards: usize,
+    /// Smallest true finger flexion (degrees), for comparison.
+    pub true_min_flexion_deg: f64,
+}
+
+/// Scores `fit` (made with `camera`, of the scene's training image) against the scene's true
+/// training hands.
+///
+/// # Errors
+/// A hand missing from the fit, or hands that cannot be posed.
+pub fn score_fit(
+    fit: &KeypointFit,
+    scene: &SynthScene,
+    camera: &PinholeCamera,
+) -> Result<FitScores, BittError> {
+    let models = procedural_pair();
+    let truth = scene.train.hands.pose_in_camera(&models)?;
+    let fitted = fit.hands.pose_in_camera(&models)?;
+    let true_2d = scene.train.keypoints_2d()?;
+    let axes = flexion_axes(&models);
+    let (mut e2, mut n2) = (0.0, 0usize);
+    let (mut e3, mut n3, mut max3) = (0.0, 0usize, 0.0f64);
+    let (mut min_flex, mut true_min, mut backwards) = (f64::INFINITY, f64::INFINITY, 0usize);
+    for (h, side) in Side::BOTH.into_iter().enumerate() {
+        let (Some(t), Some(f)) = (truth.get(side), fitted.get(side)) else {
+            return Err(BittError::Invalid(format!(
+                "the fit has no {side} hand to score"
+            )));
+        };
+        let t2 = true_2d
+            .hand(side)
+            .ok_or_else(|| BittError::Invalid(format!("no true {side} keypoints")))?;
+        for (k, j) in f.joints.iter().enumerate() {
+            let p = camera
+                .camera_to_pixel(*j)
+                .map_or(f64::INFINITY, |p| p.distance(DVec2::new(t2[k].x, t2[k].y)));
+            e2 += p;
+            n2 += 1;
+        }
+        for k in 1..NUM_KEYPOINTS {
+            let d = ((f.joints[k] - f.joints[0]) - (t.joints[k] - t.joints[0])).length() * 1e3;
+            e3 += d;
+            max3 = max3.max(d);
+            n3 += 1;
+        }
+        let flex = |p: &bitt_mesh::HandParams| {
+            let aa = models.get(side).pose_axis_angles(&p.pose);
+            flexion_angles(&aa, &axes[45 * h..45 * h + 45])
+                .into_iter()
+                .flatten()
+                .collect::<Vec<f64>>()
+        };
+        if let Some(p) = fit.hands.hand(side) {
+            for a in flex(p) {
+                min_flex = min_flex.min(a.to_degrees());
+                if a < FLEXION_RANGE.0 - 1e-3 {
+                    backwards += 1;
+                }
+            }
+        }
+        if let Some(p) = scene.train.hands.hand(side) {
+            for a in flex(p) {
+                true_min = true_min.min(a.to_degrees());
+            }
+        }
+    }
+    Ok(FitScores {
+        joint_2d_px: e2 / n2.max(1) as f64,
+        joint_3d_mm: e3 / n3.max(1) as f64,
+        max_joint_3d_mm: max3,
+        min_flexion_deg: min_flex,
+        bent_backwards: backwards,
+        true_min_flexion_deg: true_min,
+    })
+}

@@ -1,0 +1,358 @@
+//! The job of `bitt fit-hands` (and of `train-scene --image IMG --keypoints FILE`): a photo
+//! and a keypoint file to both hands, optionally refined against a hand mask, and the output
+//! folder (`hands.json`, `fit.json`, `overlay.png`).
+
+use std::path::{Path, PathBuf};
+
+use bitt_mesh::keypoints::{KeypointFormat, KeypointOptions, TwoHandKeypoints, read_keypoints};
+use bitt_mesh::{HandPair, PinholeCamera, Side, TwoHandScene};
+use burn::tensor::Device;
+
+use super::{FitConfig, FitObserver, KeypointFit, fit_keypoints};
+use crate::BittError;
+use crate::assets::HandAssets;
+use crate::config::TrainConfig;
+use crate::real::{HandSource, PriorSource, check_sources, load_models};
+use crate::refine::{
+    HANDS_JSON, PhotoRefinement, RefineConfig, RefineObserver, outlines, overlay_scale, read_mask,
+    refine_photo_hands,
+};
+
+/// The fit's record in a `fit-hands` folder.
+pub const FIT_JSON: &str = "fit.json";
+
+/// The un-mirrored photo a `fit-hands --mirrored` folder's `hands.json` is for.
+pub const UNMIRRORED_IMAGE: &str = "image.png";
+
+/// Where the keypoints come from and how to read them.
+#[derive(Debug, Clone)]
+pub struct KeypointSource {
+    /// The keypoint file.
+    pub path: PathBuf,
+    /// Its format (`None`: guessed from the content).
+    pub format: Option<KeypointFormat>,
+    /// The photo is a mirrored selfie: it is un-mirrored (flipped left-right) before the
+    /// fit, with its keypoints and mask, so that each hand gets its own side's model.
+    pub mirrored: bool,
+}
+
+/// `fx,fy,cx,cy` (pixels) as four positive-focal numbers.
+///
+/// # Errors
+/// Not four finite numbers, or a focal length that is not positive.
+pub fn parse_intrinsics(text: &str) -> Result<[f64; 4], BittError> {
+    let values: Vec<&str> = text.split(',').map(str::trim).collect();
+    let bad = |why: String| {
+        BittError::Invalid(format!(
+            "--intrinsics {text:?}: {why} (expected fx,fy,cx,cy in pixels, e.g. 600,600,320,240)"
+        ))
+    };
+    if values.len() != 4 {
+        return Err(bad(format!("{} values", values.len())));
+    }
+    let mut out = [0.0; 4];
+    for (o, v) in out.iter_mut().zip(&values) {
+        *o = v
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| bad(format!("{v:?} is not a finite number")))?;
+    }
+    if out[0] <= 0.0 || out[1] <= 0.0 {
+        return Err(bad("the focal lengths must be positive".into()));
+    }
+    Ok(out)
+}
+
+/// A photo's keypoint fit.
+#[derive(Debug, Clone)]
+pub struct PhotoFit {
+    /// The keypoint fit (hands at the photo's camera).
+    pub fit: KeypointFit,
+    /// The keypoints as fitted (un-mirrored with the photo when `mirrored`).
+    pub keypoints: TwoHandKeypoints,
+    /// The silhouette refinement that followed, when a mask was given.
+    pub refinement: Option<PhotoRefinement>,
+    /// The final hands (refined when a mask was given), at the photo's camera.
+    pub hands: TwoHandScene,
+    /// The hand models.
+    pub models: HandPair,
+    /// The photo `[3, H, W]` as fitted (un-mirrored when `mirrored`).
+    pub image: Vec<f32>,
+    /// Whether the photo was un-mirrored.
+    pub mirrored: bool,
+    /// Where the intrinsics came from.
+    pub camera_source: String,
+    /// The photo with the keypoints (yellow), the fitted joints and bones (cyan) and the
+    /// fitted hands' outlines (green), and its `[H, W]`.
+    pub overlay: (Vec<f32>, [usize; 2]),
+}
+
+impl PhotoFit {
+    /// The record `fit.json` holds.
+    pub fn record(&self) -> serde_json::Value {
+        serde_json::json!({
+            "kind": "keypoint fit",
+            "keypoint_format": self.keypoints.format,
+            "mirrored": self.mirrored,
+            "camera": self.camera_source,
+            "report": self.fit.report,
+            "refinement": self.refinement.as_ref().map(PhotoRefinement::record),
+        })
+    }
+}
+
+/// Flips a planar image `[C, H, W]` left-right.
+fn flip_planar(image: &[f32], channels: usize, [h, w]: [usize; 2]) -> Vec<f32> {
+    let mut out = vec![0.0; image.len()];
+    for c in 0..channels {
+        for y in 0..h {
+            for x in 0..w {
+                out[(c * h + y) * w + x] = image[(c * h + y) * w + (w - 1 - x)];
+            }
+        }
+    }
+    out
+}
+
+/// Fits both hands to the keypoints of a photo (any size); with `mask` and `refine`, then
+/// refines them against the mask (the silhouette refinement of `bitt refine-hands`, at the
+/// BiTT crop size of 256 with `train`'s texture prior).
+///
+/// # Errors
+/// Missing or unreadable files, malformed keypoints (naming the file and field), a mask of
+/// the wrong size, bad intrinsics, no hand with enough keypoints; as [`fit_keypoints`] and
+/// [`refine_photo_hands`].
+#[allow(clippy::too_many_arguments)]
+pub fn fit_photo(
+    image: &Path,
+    keypoints: &KeypointSource,
+    intrinsics: Option<[f64; 4]>,
+    mask: Option<&Path>,
+    hands: &HandSource,
+    prior: &PriorSource,
+    config: &FitConfig,
+    refine: Option<(&TrainConfig, &RefineConfig, &mut dyn RefineObserver)>,
+    cache: Option<&Path>,
+    device: &Device,
+    observer: &mut dyn FitObserver,
+) -> Result<PhotoFit, BittError> {
+    check_sources(hands, prior)?;
+    if !image.is_file() {
+        return Err(BittError::io(
+            image,
+            std::io::Error::new(std::io::ErrorKind::NotFound, "input image not found"),
+        ));
+    }
+    let photo = bitt_texture::image_io::load_image(image)?;
+    let (w, h) = (photo.width, photo.height);
+    let options = KeypointOptions {
+        format: keypoints.format,
+        image_size: [w as u32, h as u32],
+        mirrored: false,
+    };
+    let mut points = read_keypoints(&keypoints.path, &options)?;
+    let mut pixels = photo.data;
+    let mut mask_pixels = match mask {
+        Some(m) => Some((read_mask(m, [h, w])?, m.to_path_buf())),
+        None => None,
+    };
+    if keypoints.mirrored {
+        pixels = flip_planar(&pixels, 3, [h, w]);
+        points = points.mirrored(w as f64);
+        points.notes.push(
+            "the photo is a mirrored selfie (--mirrored): photo, keypoints and mask were \
+             flipped left-right before the fit, so each hand is fitted by its own side's model"
+                .into(),
+        );
+        if let Some((m, _)) = &mut mask_pixels {
+            *m = flip_planar(m, 1, [h, w]);
+        }
+    }
+    let (camera, camera_source) = match intrinsics {
+        Some([fx, fy, cx, cy]) => (
+            PinholeCamera::from_intrinsics([fx, fy], [cx, cy], w as u32, h as u32)?,
+            format!("--intrinsics {fx},{fy},{cx},{cy}"),
+        ),
+        None => {
+            let c = PinholeCamera::default_for_image(w as u32, h as u32)?;
+            (
+                c,
+                format!(
+                    "default: focal {:.1} px (the image diagonal), principal point at the centre",
+                    c.focal().x
+                ),
+            )
+        }
+    };
+    let models = load_models(hands, prior)?;
+    let fit = fit_keypoints(&models, &points, &camera, config, device, observer)?;
+    let both = fit.hands.left.is_some() && fit.hands.right.is_some();
+    let mut notes = Vec::new();
+    let refinement = match (refine, mask_pixels) {
+        (Some((train, refine_config, refine_observer)), Some(m)) if both => {
+            Some(refine_photo_hands(
+                image,
+                pixels.clone(),
+                &fit.hands,
+                Some(m),
+                models.clone(),
+                prior,
+                train,
+                crate::real::BITT_CROP_SIZE as usize,
+                refine_config,
+                cache,
+                device,
+                refine_observer,
+            )?)
+        }
+        (Some(_), Some(_)) => {
+            notes.push(
+                "the mask refinement needs both hands and was skipped: only one was fitted".into(),
+            );
+            None
+        }
+        _ => None,
+    };
+    let final_hands = refinement
+        .as_ref()
+        .map_or_else(|| fit.hands.clone(), |r| r.refinement.hands.clone());
+    let mut fit = fit;
+    fit.report.notes.extend(notes);
+    let assets = HandAssets::new(models.clone(), 64)?;
+    let overlay = keypoint_overlay(&pixels, &models, &assets, &points, &final_hands)?;
+    Ok(PhotoFit {
+        fit,
+        keypoints: points,
+        refinement,
+        hands: final_hands,
+        models,
+        image: pixels,
+        mirrored: keypoints.mirrored,
+        camera_source,
+        overlay,
+    })
+}
+
+/// The overlay of [`PhotoFit::overlay`]: `image` `[3, H, W]` at `hands`' camera with
+/// `keypoints` (yellow crosses), the fitted joints and bones (cyan) and the hands' outlines
+/// (green), enlarged to at least 512 pixels wide; returns it and its `[H, W]`.
+///
+/// # Errors
+/// When a hand cannot be posed or the image does not match the camera.
+pub fn keypoint_overlay(
+    image: &[f32],
+    models: &HandPair,
+    assets: &HandAssets,
+    keypoints: &TwoHandKeypoints,
+    hands: &TwoHandScene,
+) -> Result<(Vec<f32>, [usize; 2]), BittError> {
+    let w = hands.camera.width as usize;
+    let s = overlay_scale(w);
+    let (mut out, [bh, bw]) =
+        outlines(image, models, &assets.scene, &[(hands, [0.1, 1.0, 0.2])], s)?;
+    let posed = hands.pose_in_camera(models)?;
+    let sf = s as f64;
+    let mut put = |x: f64, y: f64, colour: [f32; 3]| {
+        let (px, py) = ((x + 0.5) * sf, (y + 0.5) * sf);
+        if px >= 0.0 && py >= 0.0 && (px as usize) < bw && (py as usize) < bh {
+            let p = py as usize * bw + px as usize;
+            for (c, v) in colour.iter().enumerate() {
+                out[c * bw * bh + p] = *v;
+            }
+        }
+    };
+    const CYAN: [f32; 3] = [0.1, 0.9, 1.0];
+    const YELLOW: [f32; 3] = [1.0, 0.9, 0.1];
+    for side in Side::BOTH {
+        let Some(p) = posed.get(side) else { continue };
+        let px: Vec<Option<bitt_mesh::glam::DVec2>> = p
+            .joints
+            .iter()
+            .map(|j| hands.camera.camera_to_pixel(*j))
+            .collect();
+        for (child, parent) in crate::hand_priors::bones() {
+            if let (Some(a), Some(b)) = (px[child], px[parent]) {
+                let n = ((a - b).length() * sf).ceil().max(1.0) as usize;
+                for i in 0..=n {
+                    let q = b + (a - b) * (i as f64 / n as f64);
+                    put(q.x, q.y, CYAN);
+                }
+            }
+        }
+        for q in px.iter().flatten() {
+            for dy in -2..=2 {
+                for dx in -2..=2 {
+                    put(q.x + dx as f64 / sf, q.y + dy as f64 / sf, CYAN);
+                }
+            }
+        }
+    }
+    for side in Side::BOTH {
+        for k in keypoints.hand(side).into_iter().flatten() {
+            if k.confidence <= 0.0 {
+                continue;
+            }
+            // A cross of 4 enlarged pixels' arms.
+            for d in -4i32..=4 {
+                let d = f64::from(d) / sf;
+                put(k.x + d, k.y, YELLOW);
+                put(k.x, k.y + d, YELLOW);
+            }
+        }
+    }
+    Ok((out, [bh, bw]))
+}
+
+/// Refuses an output folder that exists, is not empty and holds no `fit.json` (not an
+/// earlier `fit-hands` output): nothing of the user's is overwritten.
+///
+/// # Errors
+/// [`BittError::Invalid`] naming the folder.
+pub fn check_fit_out(out: &Path) -> Result<(), BittError> {
+    if out.is_dir() {
+        let mut entries = std::fs::read_dir(out).map_err(|e| BittError::io(out, e))?;
+        if entries.next().is_some() && !out.join(FIT_JSON).is_file() {
+            return Err(BittError::Invalid(format!(
+                "{}: the folder exists and is not a fit-hands output (no {FIT_JSON}); choose \
+                 another --out",
+                out.display()
+            )));
+        }
+    } else if out.exists() {
+        return Err(BittError::Invalid(format!(
+            "{}: exists and is not a folder",
+            out.display()
+        )));
+    }
+    Ok(())
+}
+
+/// Writes `hands.json`, `fit.json` and `overlay.png` into `out` (created if missing), and for
+/// a mirrored photo the un-mirrored `image.png` the hands are for. A folder that exists, is
+/// not empty and holds no `fit.json` is not ours and is refused.
+///
+/// # Errors
+/// A foreign folder, or a write failure (each file is written atomically).
+pub fn write_fit_outputs(out: &Path, fit: &PhotoFit) -> Result<(), BittError> {
+    check_fit_out(out)?;
+    std::fs::create_dir_all(out).map_err(|e| BittError::io(out, e))?;
+    let text = bitt_mesh::annotation::hands_json(&fit.hands, &fit.models)?;
+    bitt_mesh::export::write_atomically(&out.join(HANDS_JSON), text.as_bytes())?;
+    if fit.mirrored {
+        let (w, h) = (
+            fit.hands.camera.width as usize,
+            fit.hands.camera.height as usize,
+        );
+        crate::outputs::write_png(&out.join(UNMIRRORED_IMAGE), &fit.image, h, w)?;
+    }
+    let [oh, ow] = fit.overlay.1;
+    crate::outputs::write_png(
+        &out.join(crate::run::files::REFINE_OVERLAY),
+        &fit.overlay.0,
+        oh,
+        ow,
+    )?;
+    // fit.json last: a folder with it is complete.
+    crate::outputs::write_json(&out.join(FIT_JSON), &fit.record())
+}
