@@ -46,6 +46,7 @@ use crate::refine_hands::{RefineBar, refine_config};
 
 /// Arguments of `bitt train-scene`.
 #[derive(Debug, clap::Args)]
+#[command(group(clap::ArgGroup::new("image_hands").args(["annotation", "keypoints"])))]
 pub struct TrainSceneArgs {
     /// A synthetic scene folder (`bitt synth`). Default: the built-in demo scene, generated
     /// (and cached) by the synthetic generator.
@@ -54,7 +55,7 @@ pub struct TrainSceneArgs {
     /// Real data: a photograph of two interacting hands, with --annotation (whose camera is
     /// for the reference's 256x256 crop, the BiTT demo `NN.jpg`) or with --keypoints (any
     /// size; the hands are fitted to them first, as `bitt fit-hands` does).
-    #[arg(long, conflicts_with_all = ["scene", "interhand"])]
+    #[arg(long, requires = "image_hands", conflicts_with_all = ["scene", "interhand"])]
     pub image: Option<PathBuf>,
     /// Real data: the image's BiTT annotation pickle (the demo `NN.pkl` layout) or a
     /// `hands.json` (`bitt refine-hands`, `bitt fit-hands`).
@@ -1163,6 +1164,30 @@ mod tests {
         );
         assert!(e.contains("real data"), "{e}");
         assert!(Cli::try_parse_from(["bitt", "--image", s(&img)]).is_err());
+        // Malformed keypoints are named and leave no run folder.
+        let bad_kp = dir.join("bad_keypoints.json");
+        std::fs::write(&bad_kp, r#"{"right": [[1, 2, 1]]}"#).unwrap();
+        let e = format!(
+            "{:#}",
+            run(&args(&[
+                "--image",
+                s(&img),
+                "--keypoints",
+                s(&bad_kp),
+                "--out",
+                s(&out)
+            ]))
+            .unwrap_err()
+        );
+        assert!(
+            e.contains("bad_keypoints.json") && e.contains("right"),
+            "{e}"
+        );
+        assert!(
+            !out.exists(),
+            "a failed keypoint run created {}",
+            out.display()
+        );
         assert!(
             Cli::try_parse_from([
                 "bitt",

@@ -200,6 +200,30 @@ pub fn base64(bytes: &[u8]) -> String {
     out
 }
 
+/// Refuses an output folder that exists, is not empty and holds no `marker` file (so is not an
+/// earlier output of `command`): nothing of the user's is overwritten.
+///
+/// # Errors
+/// [`BittError::Invalid`] naming the folder.
+pub fn check_own_folder(out: &Path, marker: &str, command: &str) -> Result<(), BittError> {
+    if out.is_dir() {
+        let mut entries = std::fs::read_dir(out).map_err(|e| BittError::io(out, e))?;
+        if entries.next().is_some() && !out.join(marker).is_file() {
+            return Err(BittError::Invalid(format!(
+                "{}: the folder exists and is not a {command} output (no {marker}); choose \
+                 another --out",
+                out.display()
+            )));
+        }
+    } else if out.exists() {
+        return Err(BittError::Invalid(format!(
+            "{}: exists and is not a folder",
+            out.display()
+        )));
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

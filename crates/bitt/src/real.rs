@@ -785,7 +785,30 @@ pub fn annotation_setup(
     device: &Device,
 ) -> Result<RealSetup, BittError> {
     let models = load_models(hands, prior)?;
-    let mut view = annotation_view(image, annotation, &models, config.nets.image_size)?;
+    let view = annotation_view(image, annotation, &models, config.nets.image_size)?;
+    let source = RealSource::Annotation {
+        image: absolute(image),
+        annotation: absolute(annotation),
+    };
+    single_view_setup(
+        view, source, image, models, hands, prior, config, cache, refine, device,
+    )
+}
+
+/// The setup of a run on one prepared view (`image` is its photo).
+#[allow(clippy::too_many_arguments)]
+fn single_view_setup(
+    mut view: RealView,
+    source: RealSource,
+    image: &Path,
+    models: HandPair,
+    hands: &HandSource,
+    prior: &PriorSource,
+    config: TrainConfig,
+    cache: Option<&Path>,
+    refine: Option<MeshRefine<'_>>,
+    device: &Device,
+) -> Result<RealSetup, BittError> {
     let (trainer, refinement) = refined_real_trainer(
         &view.image,
         &mut view.hands,
@@ -800,10 +823,7 @@ pub fn annotation_setup(
         refinement,
         input: RealInput {
             format: INPUT_FORMAT.into(),
-            source: RealSource::Annotation {
-                image: absolute(image),
-                annotation: absolute(annotation),
-            },
+            source,
             hands: hands.absolute(),
             prior: prior.absolute(),
             train: ViewRecord {
@@ -848,7 +868,7 @@ pub fn keypoint_setup(
         }
     }
     let models = fit.models.clone();
-    let mut view = prepare_view(
+    let view = prepare_view(
         "train",
         image,
         fit.image.clone(),
@@ -856,41 +876,14 @@ pub fn keypoint_setup(
         &models,
         config.nets.image_size,
     )?;
-    let (trainer, refinement) = refined_real_trainer(
-        &view.image,
-        &mut view.hands,
-        models,
-        prior,
-        config,
-        cache,
-        refine,
-        device,
-    )?;
-    Ok(RealSetup {
-        refinement,
-        input: RealInput {
-            format: INPUT_FORMAT.into(),
-            source: RealSource::Keypoints {
-                image: absolute(image),
-                keypoints: absolute(keypoints),
-                mirrored: fit.mirrored,
-            },
-            hands: hands.absolute(),
-            prior: prior.absolute(),
-            train: ViewRecord {
-                source: absolute(image),
-                ..ViewRecord::from(&view)
-            },
-            novel_views: Vec::new(),
-            novel_poses: Vec::new(),
-        },
-        scene: RealScene {
-            train: view,
-            novel_views: Vec::new(),
-            novel_poses: Vec::new(),
-        },
-        trainer,
-    })
+    let source = RealSource::Keypoints {
+        image: absolute(image),
+        keypoints: absolute(keypoints),
+        mirrored: fit.mirrored,
+    };
+    single_view_setup(
+        view, source, image, models, hands, prior, config, cache, refine, device,
+    )
 }
 
 /// A fresh real run from a selected InterHand2.6M scene.

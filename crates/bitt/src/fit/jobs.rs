@@ -310,22 +310,7 @@ pub fn keypoint_overlay(
 /// # Errors
 /// [`BittError::Invalid`] naming the folder.
 pub fn check_fit_out(out: &Path) -> Result<(), BittError> {
-    if out.is_dir() {
-        let mut entries = std::fs::read_dir(out).map_err(|e| BittError::io(out, e))?;
-        if entries.next().is_some() && !out.join(FIT_JSON).is_file() {
-            return Err(BittError::Invalid(format!(
-                "{}: the folder exists and is not a fit-hands output (no {FIT_JSON}); choose \
-                 another --out",
-                out.display()
-            )));
-        }
-    } else if out.exists() {
-        return Err(BittError::Invalid(format!(
-            "{}: exists and is not a folder",
-            out.display()
-        )));
-    }
-    Ok(())
+    crate::outputs::check_own_folder(out, FIT_JSON, "fit-hands")
 }
 
 /// Writes `hands.json`, `fit.json` and `overlay.png` into `out` (created if missing), and for

@@ -341,23 +341,7 @@ pub fn refine_photo_hands(
 /// # Errors
 /// [`BittError::Invalid`] naming the folder.
 pub fn check_refine_out(out: &Path) -> Result<(), BittError> {
-    let files = crate::run::files::REFINE;
-    if out.is_dir() {
-        let mut entries = std::fs::read_dir(out).map_err(|e| BittError::io(out, e))?;
-        if entries.next().is_some() && !out.join(files).is_file() {
-            return Err(BittError::Invalid(format!(
-                "{}: the folder exists and is not a refine-hands output (no {files}); choose \
-                 another --out",
-                out.display()
-            )));
-        }
-    } else if out.exists() {
-        return Err(BittError::Invalid(format!(
-            "{}: exists and is not a folder",
-            out.display()
-        )));
-    }
-    Ok(())
+    crate::outputs::check_own_folder(out, crate::run::files::REFINE, "refine-hands")
 }
 
 /// Writes `hands.json`, `refine.json` and `overlay.png` into `out` (created if missing). A
