@@ -99,6 +99,8 @@ fn compare(reference: &serde_json::Value, other: &serde_json::Value) -> Vec<Stri
         "grad_texture_params",
         "hand_vertex_sums",
         "grad_hand_pose",
+        "hand_joints",
+        "grad_joints_pose",
     ] {
         let flat = |v: &serde_json::Value| -> Vec<f64> {
             match &v[field] {

@@ -40,10 +40,18 @@ struct Numbers {
     /// respect to both hands' finger axis-angles.
     hand_vertex_sums: Vec<f32>,
     grad_hand_pose: Vec<f32>,
+    /// The joints-only pass of the keypoint fit (`HandLayer::joints`): both hands' 21 joints
+    /// flattened, and the gradient of a weighted sum of them with respect to the finger pose.
+    hand_joints: Vec<f32>,
+    grad_joints_pose: Vec<f32>,
 }
 
-/// The hand layer (`bitt::hand_layer`) posing both procedural hands, with a gradient.
-fn hand_layer_check(device: &Device) -> Result<(Vec<f32>, Vec<f32>)> {
+/// The outputs of [`hand_layer_check`].
+type HandLayerOutputs = [Vec<f32>; 4];
+
+/// The hand layer (`bitt::hand_layer`) posing both procedural hands, with a gradient; then
+/// its joints-only pass, with a gradient.
+fn hand_layer_check(device: &Device) -> Result<HandLayerOutputs> {
     use bitt::hand_layer::{HandLayer, HandLayerParams};
     let models = bitt_mesh::procedural_pair();
     let ad = device.clone().autodiff();
@@ -77,7 +85,26 @@ fn hand_layer_check(device: &Device) -> Result<(Vec<f32>, Vec<f32>)> {
             .try_to_vec::<f32>()
             .map_err(|e| anyhow::anyhow!("{e:?}"))
     };
-    Ok((read(sums)?, read(grad.reshape([90]))?))
+    let pose_j = t2(pattern(90, 0.4, 0.29, 0.3), [2, 45]).require_grad();
+    let params_j = HandLayerParams {
+        finger_pose: pose_j.clone(),
+        ..params
+    };
+    let joints = layer.joints(&params_j);
+    let joint_weights = Tensor::<3>::from_data(
+        TensorData::new(pattern(2 * 21 * 3, 1.0, 0.17, 0.4), [2, 21, 3]),
+        &ad,
+    );
+    let grads_j = (joints.clone() * joint_weights).sum().backward();
+    let grad_j = pose_j
+        .grad(&grads_j)
+        .context("no gradient of the joints for the finger pose")?;
+    Ok([
+        read(sums)?,
+        read(grad.reshape([90]))?,
+        read(joints.without_autodiff().reshape([2 * 21 * 3]))?,
+        read(grad_j.reshape([90]))?,
+    ])
 }
 
 /// A small texture PCA on a 9x7 layout (every other texel used), deterministic.
@@ -167,10 +194,17 @@ fn compute(device: &Device) -> Result<Numbers> {
     let gw = w.grad(&grads).context("no gradient for the conv weight")?;
     let gb = b.grad(&grads).context("no gradient for the conv bias")?;
     let (texture_image_sums, grad_texture_params) = texture_check(device)?;
-    let (hand_vertex_sums, grad_hand_pose) = hand_layer_check(device)?;
+    let [
+        hand_vertex_sums,
+        grad_hand_pose,
+        hand_joints,
+        grad_joints_pose,
+    ] = hand_layer_check(device)?;
     Ok(Numbers {
         hand_vertex_sums,
         grad_hand_pose,
+        hand_joints,
+        grad_joints_pose,
         texture_image_sums,
         grad_texture_params,
         loss: loss_v,
