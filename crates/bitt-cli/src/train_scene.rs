@@ -118,6 +118,10 @@ pub struct TrainSceneArgs {
     /// used; other options except --iterations are ignored).
     #[arg(long, conflicts_with_all = ["scene", "out", "image", "interhand"])]
     pub resume: Option<PathBuf>,
+    /// Write a new run into an existing folder that is not a run (it must hold no file of a
+    /// name the run writes: nothing of the user's is overwritten).
+    #[arg(long, conflicts_with = "resume")]
+    pub force: bool,
     /// Cache folder for the demo scene and the fitted texture PCA.
     #[arg(long, default_value = "runs/cache")]
     pub cache: PathBuf,
@@ -555,6 +559,17 @@ fn resumed(
     let ckpt = dir.join(files::CHECKPOINT);
     let checkpoint = Checkpoint::load(&ckpt)
         .with_context(|| format!("--resume {}: no usable checkpoint", dir.display()))?;
+    if let Some(n) = args.iterations
+        && n < checkpoint.iteration
+    {
+        bail!(
+            "--resume {}: the run is already at iteration {}; --iterations {n} would end before \
+             it (give at least {})",
+            dir.display(),
+            checkpoint.iteration,
+            checkpoint.iteration
+        );
+    }
     let cache = Some(args.cache.as_path());
     let (mut trainer, input) = if RealInput::is_real_run(dir) {
         let (input, scene, trainer) = RealInput::resume_trainer(dir, config, cache, device)
@@ -635,28 +650,134 @@ pub(crate) fn sources(
     (hands, prior)
 }
 
-/// The folder of a new run. `--out` given explicitly must not hold a run (resume it
-/// instead); the default folder moves on to `runs/train-scene-2`, `-3`, ... so rerunning the
-/// demo never touches an earlier run.
-fn fresh_out(out: &Path, default: &Path) -> Result<PathBuf> {
-    let holds_run = |dir: &Path| dir.join(files::CHECKPOINT).exists();
-    if !holds_run(out) {
-        return Ok(out.to_path_buf());
-    }
-    if out != default {
+/// Names a run writes at the top of its folder.
+const RUN_NAMES: [&str; 18] = [
+    files::CONFIG,
+    files::CHECKPOINT,
+    files::METRICS,
+    files::LIGHT,
+    files::REPORT,
+    files::AVATAR,
+    files::LOSS_PLOT,
+    files::SCENE,
+    files::REFINE,
+    files::REFINE_OVERLAY,
+    FIT_RECORD,
+    FIT_OVERLAY,
+    REAL_SCORES,
+    "input.json",
+    "input",
+    "textures",
+    "renders",
+    "turntable",
+];
+
+/// What an output folder holds.
+#[derive(Debug, PartialEq)]
+enum OutFolder {
+    /// Missing or empty: a new run may go there.
+    Free,
+    /// A run of ours (a checkpoint).
+    Run,
+    /// An earlier run of ours that stopped before its first checkpoint (its configuration
+    /// and input, nothing else): a new run may replace it.
+    Unfinished,
+    /// Anything else: not ours.
+    Foreign,
+}
+
+fn out_folder(dir: &Path) -> Result<OutFolder> {
+    if dir.is_symlink() && !dir.exists() {
         bail!(
+            "{}: is a symbolic link to nothing; choose another --out",
+            dir.display()
+        );
+    }
+    if !dir.exists() {
+        return Ok(OutFolder::Free);
+    }
+    if !dir.is_dir() {
+        bail!("{}: exists and is not a folder", dir.display());
+    }
+    if dir.join(files::CHECKPOINT).exists() {
+        return Ok(OutFolder::Run);
+    }
+    let names: Vec<String> = std::fs::read_dir(dir)
+        .with_context(|| format!("reading {}", dir.display()))?
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    if names.is_empty() {
+        return Ok(OutFolder::Free);
+    }
+    let ours = names
+        .iter()
+        .all(|n| RUN_NAMES.contains(&n.as_str()) || n.starts_with(".checkpoint"));
+    let started = dir.join(files::CONFIG).is_file()
+        && (dir.join(files::SCENE).join("scene.json").is_file()
+            || dir.join("input.json").is_file());
+    Ok(if ours && started {
+        OutFolder::Unfinished
+    } else {
+        OutFolder::Foreign
+    })
+}
+
+/// The folder of a new run. `--out` given explicitly must not hold a run (resume it
+/// instead), nor be a non-empty folder that is not a run of ours (unless `force`, and even
+/// then no file of a name the run writes may be in it); the default folder moves on to
+/// `runs/train-scene-2`, `-3`, ... past earlier runs and foreign folders, so rerunning the
+/// demo never touches anything.
+fn fresh_out(out: &Path, default: &Path, force: bool) -> Result<PathBuf> {
+    let state = out_folder(out)?;
+    match state {
+        OutFolder::Free | OutFolder::Unfinished => return Ok(out.to_path_buf()),
+        OutFolder::Foreign if force && out != default => {
+            let clash: Vec<&str> = RUN_NAMES
+                .iter()
+                .copied()
+                .filter(|n| out.join(n).exists())
+                .collect();
+            if !clash.is_empty() {
+                bail!(
+                    "{}: --force never overwrites files it did not write, and the folder holds {}                      (names a run writes); choose another --out",
+                    out.display(),
+                    clash.join(", ")
+                );
+            }
+            return Ok(out.to_path_buf());
+        }
+        _ if out == default => {}
+        OutFolder::Run => bail!(
             "{} already holds a run; use --resume {} to continue it or choose another --out",
             out.display(),
             out.display()
-        );
+        ),
+        OutFolder::Foreign => bail!(
+            "{}: the folder exists, is not empty and holds no run of bitt (no {}); choose \
+             another --out, or add --force to write the run into it (it never overwrites a \
+             file of the user's)",
+            out.display(),
+            files::CHECKPOINT
+        ),
     }
-    let next = (2..)
-        .map(|n| PathBuf::from(format!("{}-{n}", default.display())))
-        .find(|dir| !holds_run(dir))
-        .expect("an unused folder name");
+    let mut next = None;
+    for n in 2.. {
+        let dir = PathBuf::from(format!("{}-{n}", default.display()));
+        if matches!(out_folder(&dir)?, OutFolder::Free | OutFolder::Unfinished) {
+            next = Some(dir);
+            break;
+        }
+    }
+    let next = next.expect("an unused folder name");
     println!(
-        "{} holds an earlier run; this one goes to {}",
+        "{} holds {}; this run goes to {}",
         default.display(),
+        if state == OutFolder::Run {
+            "an earlier run"
+        } else {
+            "files that are not a run"
+        },
         next.display()
     );
     Ok(next)
@@ -672,7 +793,7 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
             (dir.clone(), trainer, input)
         }
         None => {
-            let out = fresh_out(&args.out, Path::new(DEFAULT_OUT))?;
+            let out = fresh_out(&args.out, Path::new(DEFAULT_OUT), args.force)?;
             let mut config = training_config(args.config.as_deref(), args.preset)?;
             if let Some(n) = args.iterations {
                 config.iterations = n;
@@ -852,21 +973,59 @@ mod tests {
             std::fs::create_dir_all(d).unwrap();
             std::fs::write(d.join(files::CHECKPOINT), b"x").unwrap();
         };
-        assert_eq!(fresh_out(&default, &default).unwrap(), default);
+        assert_eq!(fresh_out(&default, &default, false).unwrap(), default);
         finished(&default);
-        let second = fresh_out(&default, &default).unwrap();
+        let second = fresh_out(&default, &default, false).unwrap();
         assert_eq!(second, dir.join("runs/train-scene-2"));
         finished(&second);
         assert_eq!(
-            fresh_out(&default, &default).unwrap(),
+            fresh_out(&default, &default, false).unwrap(),
             dir.join("runs/train-scene-3")
         );
-        let err = fresh_out(&second, &default).unwrap_err().to_string();
+        let err = fresh_out(&second, &default, false).unwrap_err().to_string();
         assert!(err.contains("already holds a run"), "{err}");
         assert_eq!(
-            fresh_out(&dir.join("other"), &default).unwrap(),
+            fresh_out(&dir.join("other"), &default, false).unwrap(),
             dir.join("other")
         );
+        // A folder of the user's is refused; --force writes into it only when nothing in it
+        // has a name the run writes, and the default folder moves on past it.
+        let mine = dir.join("mine");
+        std::fs::create_dir_all(&mine).unwrap();
+        std::fs::write(mine.join("notes.txt"), "mine").unwrap();
+        let err = fresh_out(&mine, &default, false).unwrap_err().to_string();
+        assert!(
+            err.contains("holds no run") && err.contains("--force"),
+            "{err}"
+        );
+        assert_eq!(fresh_out(&mine, &default, true).unwrap(), mine);
+        std::fs::write(mine.join(files::CONFIG), "{\"mine\": 1}").unwrap();
+        let err = fresh_out(&mine, &default, true).unwrap_err().to_string();
+        assert!(
+            err.contains("never overwrites") && err.contains("config.json"),
+            "{err}"
+        );
+        let own_default = dir.join("fresh-default");
+        std::fs::create_dir_all(&own_default).unwrap();
+        std::fs::write(own_default.join(files::CONFIG), "{}").unwrap();
+        assert_eq!(
+            fresh_out(&own_default, &own_default, false).unwrap(),
+            dir.join("fresh-default-2")
+        );
+        // An unfinished run of ours (configuration and input, no checkpoint) is replaced.
+        let unfinished = dir.join("unfinished");
+        std::fs::create_dir_all(unfinished.join(files::SCENE)).unwrap();
+        std::fs::write(unfinished.join(files::CONFIG), "{}").unwrap();
+        std::fs::write(unfinished.join(files::SCENE).join("scene.json"), "{}").unwrap();
+        assert_eq!(fresh_out(&unfinished, &default, false).unwrap(), unfinished);
+        // A dangling symbolic link is named as such.
+        #[cfg(unix)]
+        {
+            let link = dir.join("dangling");
+            std::os::unix::fs::symlink(dir.join("nowhere"), &link).unwrap();
+            let err = fresh_out(&link, &default, false).unwrap_err().to_string();
+            assert!(err.contains("symbolic link to nothing"), "{err}");
+        }
     }
 
     #[test]
@@ -960,6 +1119,23 @@ mod tests {
         ])
         .unwrap()
         .args;
+        // Fewer iterations than the run has done is refused, naming both.
+        let short = Cli::try_parse_from([
+            "bitt",
+            "--resume",
+            s(&out),
+            "--iterations",
+            "1",
+            "--cache",
+            s(&cache),
+        ])
+        .unwrap()
+        .args;
+        let e = format!("{:#}", run(&short).unwrap_err());
+        assert!(
+            e.contains("already at iteration 2") && e.contains("--iterations 1"),
+            "{e}"
+        );
         run(&resume).unwrap();
         let metrics: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap())
