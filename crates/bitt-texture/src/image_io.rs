@@ -119,11 +119,38 @@ pub fn save_png16(
     write_png(path, buf)
 }
 
+/// Why a JPEG's bytes are cut short, if they are: the last scan (`FF DA`) must be followed by
+/// the end-of-image marker (`FF D9`). The decoder fills a cut-off scan with grey without an
+/// error; entropy-coded data cannot hold `FF D9` (a data `FF` is written `FF 00`), and
+/// thumbnails in the metadata come before the main image's scans, so the check sees only
+/// the image itself (and, for multi-picture files, the last appended one). `None` for data
+/// that is not a JPEG.
+fn jpeg_truncation(bytes: &[u8]) -> Option<String> {
+    if !bytes.starts_with(&[0xFF, 0xD8]) {
+        return None;
+    }
+    let marker = |m: u8| bytes.windows(2).rposition(|w| w[0] == 0xFF && w[1] == m);
+    match (marker(0xDA), marker(0xD9)) {
+        (None, _) => {
+            Some("truncated JPEG: it holds no image data (no start-of-scan marker)".into())
+        }
+        (Some(scan), end) if end.is_none_or(|e| e < scan) => Some(format!(
+            "truncated JPEG: its image data stops at byte {} without the end-of-image marker \
+             (the file was cut short)",
+            bytes.len()
+        )),
+        _ => None,
+    }
+}
+
 /// Reads a PNG or JPEG (format guessed from the content) as a planar `[3, H, W]` image in
 /// `[0, 1]` (8-bit values `x / 255`, 16-bit `x / 65535`; grey and alpha images are
 /// converted to RGB, alpha dropped).
 pub fn load_image(path: &Path) -> Result<PlanarImage, TextureError> {
     let bytes = st::read_file(path)?;
+    if let Some(problem) = jpeg_truncation(&bytes) {
+        return Err(TextureError::format(path, problem));
+    }
     let img = image::ImageReader::new(Cursor::new(&bytes))
         .with_guessed_format()
         .map_err(|e| TextureError::io(path, e))?
@@ -212,6 +239,35 @@ pub fn load_compact_texture(path: &Path, layout: &TextureLayout) -> Result<Vec<f
 mod tests {
     use super::*;
     use crate::test_util::{Rng, temp_dir};
+
+    /// A JPEG cut in half decodes without an error (the decoder fills the rest with grey), so
+    /// it is refused by its missing end-of-image marker; the whole file still reads.
+    #[test]
+    fn a_truncated_jpeg_is_refused() {
+        let dir = temp_dir("jpeg-cut");
+        let (w, h) = (64u32, 48u32);
+        let img = image::RgbImage::from_fn(w, h, |x, y| {
+            image::Rgb([(x * 4) as u8, (y * 5) as u8, ((x + y) * 2) as u8])
+        });
+        let mut bytes = Vec::new();
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, 90)
+            .encode_image(&img)
+            .unwrap();
+        let whole = dir.join("whole.jpg");
+        std::fs::write(&whole, &bytes).unwrap();
+        let read = load_image(&whole).unwrap();
+        assert_eq!((read.width, read.height), (64, 48));
+        let cut = dir.join("cut.jpg");
+        std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+        let e = load_image(&cut).unwrap_err().to_string();
+        assert!(e.contains("cut.jpg") && e.contains("truncated JPEG"), "{e}");
+        // Trailing bytes after the end marker (some cameras add them) are fine.
+        let trailing = dir.join("trailing.jpg");
+        let mut more = bytes.clone();
+        more.extend_from_slice(b"trailer");
+        std::fs::write(&trailing, &more).unwrap();
+        assert!(load_image(&trailing).is_ok());
+    }
 
     fn pattern(w: usize, h: usize, seed: u64) -> Vec<f32> {
         let mut r = Rng::new(seed);
