@@ -559,6 +559,10 @@ fn resumed(
     let ckpt = dir.join(files::CHECKPOINT);
     let checkpoint = Checkpoint::load(&ckpt)
         .with_context(|| format!("--resume {}: no usable checkpoint", dir.display()))?;
+    // Temporaries of writes a killed process never finished (it is a run folder of ours).
+    for path in bitt_mesh::export::remove_stale_temporaries(dir)? {
+        eprintln!("removed {}, left by an interrupted write", path.display());
+    }
     if let Some(n) = args.iterations
         && n < checkpoint.iteration
     {
@@ -1119,6 +1123,9 @@ mod tests {
         ])
         .unwrap()
         .args;
+        // A temporary left by a killed checkpoint write is removed on resume.
+        let stale = out.join(".checkpoint.safetensors.tmp4000000");
+        std::fs::write(&stale, b"half a checkpoint").unwrap();
         // Fewer iterations than the run has done is refused, naming both.
         let short = Cli::try_parse_from([
             "bitt",
@@ -1137,6 +1144,7 @@ mod tests {
             "{e}"
         );
         run(&resume).unwrap();
+        assert!(!stale.exists(), "the stale temporary survived the resume");
         let metrics: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap())
                 .unwrap();

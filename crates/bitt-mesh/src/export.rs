@@ -55,6 +55,33 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), MeshError> {
     Ok(())
 }
 
+/// Removes the temporaries [`write_atomically`] leaves in `dir` when a process is killed
+/// mid-write (`.NAME.tmpPID` of another process than this one); returns what it removed.
+/// Only for folders of ours (a run folder): nothing else matches the pattern.
+///
+/// # Errors
+/// An unreadable folder or a temporary that cannot be removed.
+pub fn remove_stale_temporaries(dir: &Path) -> Result<Vec<std::path::PathBuf>, MeshError> {
+    let own = format!(".tmp{}", std::process::id());
+    let mut removed = Vec::new();
+    for entry in std::fs::read_dir(dir).map_err(|e| MeshError::io(dir, e))? {
+        let entry = entry.map_err(|e| MeshError::io(dir, e))?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let stale = name.starts_with('.')
+            && name.rsplit_once(".tmp").is_some_and(|(stem, pid)| {
+                stem.len() > 1 && !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit())
+            })
+            && !name.ends_with(&own)
+            && entry.file_type().is_ok_and(|t| t.is_file());
+        if stale {
+            let path = entry.path();
+            std::fs::remove_file(&path).map_err(|e| MeshError::io(&path, e))?;
+            removed.push(path);
+        }
+    }
+    Ok(removed)
+}
+
 fn check_hand(h: &ExportHand) -> Result<(), MeshError> {
     let err = |d: String| {
         Err(MeshError::InvalidParams(format!(
