@@ -391,7 +391,7 @@ pub fn run(args: &FitHandsArgs) -> Result<()> {
 mod tests {
     use super::*;
     use bitt_mesh::glam::DVec3;
-    use bitt_mesh::keypoints::{Keypoint, TwoHandKeypoints};
+    use bitt_mesh::keypoints::TwoHandKeypoints;
     use bitt_mesh::{HandParams, HandPose, Side};
     use bitt_tests::real_fixture::{scratch, write_image};
     use clap::Parser;
@@ -423,21 +423,8 @@ mod tests {
                 betas: vec![0.0; 10],
                 trans: DVec3::new(x, 0.0, 0.6),
             };
-            models
-                .get(side)
-                .forward(&p)
-                .unwrap()
-                .joints
-                .iter()
-                .map(|j| {
-                    let q = camera.camera_to_pixel(*j).unwrap();
-                    Keypoint {
-                        x: q.x,
-                        y: q.y,
-                        confidence: 0.9,
-                    }
-                })
-                .collect()
+            let joints = models.get(side).forward(&p).unwrap().joints;
+            bitt_mesh::keypoints::project_points(&joints, &camera, 0.9)
         };
         TwoHandKeypoints {
             left: Some(hand(Side::Left, DVec3::new(0.2, 1.0, 0.1), -0.05)),

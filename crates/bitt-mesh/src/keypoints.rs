@@ -23,7 +23,7 @@ use std::str::FromStr;
 
 use serde_json::{Map, Value};
 
-use crate::{MeshError, Side};
+use crate::{MeshError, PinholeCamera, Side};
 
 /// Number of keypoints per hand (wrist + 5 digits x 4).
 pub const NUM_KEYPOINTS: usize = 21;
@@ -47,6 +47,30 @@ const CATEGORY_NAME_KEYS: [&str; 5] = [
     "display_name",
     "displayName",
 ];
+
+/// Keypoints of camera-frame points (e.g. a posed hand's 21 joints) seen by `camera`, each
+/// with `confidence`; a point behind the camera is missing (confidence 0).
+pub fn project_points(
+    points: &[glam::DVec3],
+    camera: &PinholeCamera,
+    confidence: f64,
+) -> Vec<Keypoint> {
+    points
+        .iter()
+        .map(|p| match camera.camera_to_pixel(*p) {
+            Some(q) => Keypoint {
+                x: q.x,
+                y: q.y,
+                confidence,
+            },
+            None => Keypoint {
+                x: 0.0,
+                y: 0.0,
+                confidence: 0.0,
+            },
+        })
+        .collect()
+}
 
 /// The error when no format is given and the content matches none.
 const CANNOT_TELL: &str = "cannot tell the format (expected OpenPose \

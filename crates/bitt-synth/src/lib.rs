@@ -42,7 +42,7 @@ use std::path::Path;
 
 use bitt_mesh::annotation::FrameInfo;
 use bitt_mesh::glam::DVec3;
-use bitt_mesh::keypoints::{Keypoint, KeypointFormat, TwoHandKeypoints};
+use bitt_mesh::keypoints::{KeypointFormat, TwoHandKeypoints, project_points};
 use bitt_mesh::lbs::{HandParams, HandPose, rodrigues};
 use bitt_mesh::model::NUM_BETAS;
 use bitt_mesh::{HandPair, Side, TwoHandScene, procedural_pair};
@@ -185,23 +185,9 @@ impl SynthView {
     pub fn keypoints_2d(&self) -> Result<TwoHandKeypoints, SynthError> {
         let posed = self.hands.pose_in_camera(&procedural_pair())?;
         let hand = |side: Side| {
-            posed.get(side).map(|p| {
-                p.joints
-                    .iter()
-                    .map(|j| match self.hands.camera.camera_to_pixel(*j) {
-                        Some(q) => Keypoint {
-                            x: q.x,
-                            y: q.y,
-                            confidence: 1.0,
-                        },
-                        None => Keypoint {
-                            x: 0.0,
-                            y: 0.0,
-                            confidence: 0.0,
-                        },
-                    })
-                    .collect::<Vec<_>>()
-            })
+            posed
+                .get(side)
+                .map(|p| project_points(&p.joints, &self.hands.camera, 1.0))
         };
         Ok(TwoHandKeypoints {
             left: hand(Side::Left),

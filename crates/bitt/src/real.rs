@@ -613,6 +613,20 @@ pub fn prepare_view(
     })
 }
 
+/// An [`BittError::Io`] naming `image` when it is not a file (before anything is read).
+///
+/// # Errors
+/// The missing input image.
+pub fn require_image(image: &Path) -> Result<(), BittError> {
+    if image.is_file() {
+        return Ok(());
+    }
+    Err(BittError::io(
+        image,
+        std::io::Error::new(std::io::ErrorKind::NotFound, "input image not found"),
+    ))
+}
+
 /// Reads an image, checking its size against the camera's.
 pub fn read_image(path: &Path, camera: &PinholeCamera, what: &str) -> Result<Vec<f32>, BittError> {
     let img = load_image(path)?;
@@ -638,12 +652,7 @@ pub fn annotation_view(
     models: &HandPair,
     size: usize,
 ) -> Result<RealView, BittError> {
-    if !image.is_file() {
-        return Err(BittError::io(
-            image,
-            std::io::Error::new(std::io::ErrorKind::NotFound, "input image not found"),
-        ));
-    }
+    require_image(image)?;
     let hands = bitt_mesh::load_bitt_annotation(annotation, (BITT_CROP_SIZE, BITT_CROP_SIZE))?;
     for side in Side::BOTH {
         if hands.hand(side).is_none() {

@@ -138,12 +138,7 @@ pub fn fit_photo(
     observer: &mut dyn FitObserver,
 ) -> Result<PhotoFit, BittError> {
     check_sources(hands, prior)?;
-    if !image.is_file() {
-        return Err(BittError::io(
-            image,
-            std::io::Error::new(std::io::ErrorKind::NotFound, "input image not found"),
-        ));
-    }
+    crate::real::require_image(image)?;
     let photo = bitt_texture::image_io::load_image(image)?;
     let (w, h) = (photo.width, photo.height);
     let options = KeypointOptions {

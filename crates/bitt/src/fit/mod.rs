@@ -404,11 +404,6 @@ fn project(camera: &PinholeCamera, p: Tensor<3>) -> (Tensor<3>, Tensor<3>) {
     (x, y)
 }
 
-/// Host projection of a camera-frame point.
-fn project_host(camera: &PinholeCamera, p: DVec3) -> Option<DVec2> {
-    camera.camera_to_pixel(p)
-}
-
 /// The camera with identity extrinsics (the fit works in the camera frame).
 fn camera_frame(camera: &PinholeCamera) -> PinholeCamera {
     PinholeCamera {
@@ -716,7 +711,8 @@ impl Fitter<'_> {
                 .zip(&posed.joints)
                 .map(|(k, j)| {
                     (k.confidence > 0.0).then(|| {
-                        project_host(&self.camera, *j)
+                        self.camera
+                            .camera_to_pixel(*j)
                             .map_or(f64::INFINITY, |p| p.distance(DVec2::new(k.x, k.y)))
                     })
                 })
@@ -1066,19 +1062,9 @@ mod tests {
         };
         let posed = hands.pose_in_camera(&models).unwrap();
         let kp = |side: Side| {
-            posed.get(side).map(|p| {
-                p.joints
-                    .iter()
-                    .map(|j| {
-                        let q = camera.camera_to_pixel(*j).unwrap();
-                        Keypoint {
-                            x: q.x,
-                            y: q.y,
-                            confidence: 1.0,
-                        }
-                    })
-                    .collect()
-            })
+            posed
+                .get(side)
+                .map(|p| bitt_mesh::keypoints::project_points(&p.joints, &camera, 1.0))
         };
         let keypoints = TwoHandKeypoints {
             left: kp(Side::Left),

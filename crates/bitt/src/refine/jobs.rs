@@ -210,12 +210,7 @@ pub fn refine_photo(
     observer: &mut dyn RefineObserver,
 ) -> Result<PhotoRefinement, BittError> {
     check_sources(hands, prior)?;
-    if !image.is_file() {
-        return Err(BittError::io(
-            image,
-            std::io::Error::new(std::io::ErrorKind::NotFound, "input image not found"),
-        ));
-    }
+    crate::real::require_image(image)?;
     let scene = bitt_mesh::load_bitt_annotation(annotation, (BITT_CROP_SIZE, BITT_CROP_SIZE))?;
     for side in bitt_mesh::Side::BOTH {
         if scene.hand(side).is_none() {
