@@ -196,7 +196,8 @@ impl FitObserver for FitBar {
         );
         if self.terminal {
             eprint!("\r{line}   ");
-        } else if p.iteration.is_multiple_of(50) || p.iteration == 1 {
+        } else if p.iteration.is_multiple_of(50) || p.iteration == 1 || p.iteration == p.iterations
+        {
             eprintln!("{line}");
         }
         let _ = std::io::stderr().flush();

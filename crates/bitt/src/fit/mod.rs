@@ -200,7 +200,7 @@ pub struct FitProgress {
     pub stage: &'static str,
     /// Iteration within the whole fit (1-based).
     pub iteration: usize,
-    /// Iterations the fit plans (restarts may add some).
+    /// Iterations the fit plans (each restart adds a round of the root stage).
     pub iterations: usize,
     /// This iteration's loss.
     pub loss: f64,
@@ -744,6 +744,10 @@ impl Fitter<'_> {
                 .collect();
             if !searching.iter().any(|&s| s) {
                 break;
+            }
+            if round > 0 {
+                // A restart: the plan grows by one round.
+                self.planned += self.config.root_iterations;
             }
             let pick = |h: usize| -> &Start {
                 let c = &candidates[h];
