@@ -297,10 +297,19 @@ pub fn load_bitt_annotation(
     let bytes = std::fs::read(path).map_err(|e| {
         bitt_pickle::PickleError::new(name.clone(), 0, bitt_pickle::PickleErrorKind::Io(e))
     })?;
+    bitt_annotation_from_bytes(&bytes, path, image_size)
+}
+
+/// [`load_bitt_annotation`] on the bytes of the file; `path` only names it in errors.
+pub fn bitt_annotation_from_bytes(
+    bytes: &[u8],
+    path: &Path,
+    image_size: (u32, u32),
+) -> Result<TwoHandScene, MeshError> {
     if bytes.iter().find(|b| !b.is_ascii_whitespace()) == Some(&b'{') {
-        return scene_from_hands_json(&bytes, path);
+        return scene_from_hands_json(bytes, path);
     }
-    let root = bitt_pickle::from_bytes(&bytes, &name)?;
+    let root = bitt_pickle::from_bytes(bytes, &path.display().to_string())?;
     scene_from_bitt_annotation(&root, path, image_size)
 }
 

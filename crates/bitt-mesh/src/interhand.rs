@@ -401,7 +401,31 @@ impl InterHandDataset {
                 ));
             }
         }
-        let data: DataFile = serde_json::from_reader(open_json(&paths.data)?).map_err(|e| {
+        let data = open_json(&paths.data)?;
+        let mano = open_json(&paths.mano)?;
+        let camera = open_json(&paths.camera)?;
+        Self::from_readers(paths, data, mano, camera)
+    }
+
+    /// [`open`](Self::open) on the three annotation files' contents already in memory;
+    /// `paths` names them in errors and locates the images.
+    pub fn from_json_bytes(
+        paths: InterHandPaths,
+        data: &[u8],
+        camera: &[u8],
+        mano: &[u8],
+    ) -> Result<Self, MeshError> {
+        Self::from_readers(paths, data, mano, camera)
+    }
+
+    /// Parses and indexes the data, MANO and camera files read from `data`, `mano`, `camera`.
+    fn from_readers(
+        paths: InterHandPaths,
+        data: impl std::io::Read,
+        mano: impl std::io::Read,
+        camera: impl std::io::Read,
+    ) -> Result<Self, MeshError> {
+        let data: DataFile = serde_json::from_reader(data).map_err(|e| {
             MeshError::format(&paths.data, format!("not an InterHand2.6M data file: {e}"))
         })?;
         let mut counts = CandidateCounts::default();
@@ -447,7 +471,7 @@ impl InterHandDataset {
                 .or_default()
                 .insert(e.frame_idx.to_string());
         }
-        let mut de = serde_json::Deserializer::from_reader(open_json(&paths.mano)?);
+        let mut de = serde_json::Deserializer::from_reader(mano);
         let mano = ManoFilter { wanted: &wanted }
             .deserialize(&mut de)
             .and_then(|m| de.end().map(|()| m))
@@ -458,7 +482,7 @@ impl InterHandDataset {
                 )
             })?;
         let mano = serde_json::Value::Object(mano);
-        let cameras: serde_json::Value = serde_json::from_reader(open_json(&paths.camera)?)
+        let cameras: serde_json::Value = serde_json::from_reader(camera)
             .map_err(|e| MeshError::format(&paths.camera, format!("not valid JSON: {e}")))?;
 
         let mut candidates: BTreeMap<i64, BTreeMap<i64, Vec<InterHandEntry>>> = BTreeMap::new();

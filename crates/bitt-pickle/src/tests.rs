@@ -1712,7 +1712,7 @@ fn interhand_demo_annotation_if_present() {
 #[test]
 #[ignore = "writes files into fuzz/corpus; run on demand"]
 fn write_fuzz_seed_corpus() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/corpus/from_bytes");
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/corpus/from_bytes");
     std::fs::create_dir_all(&dir).unwrap();
     let mut seeds: Vec<Vec<u8>> = valid_pickles()
         .into_iter()
@@ -1734,7 +1734,7 @@ fn write_fuzz_seed_corpus() {
 /// are valid pickles stay valid.
 #[test]
 fn fuzz_seed_corpus_replays() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/corpus/from_bytes");
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/corpus/from_bytes");
     let mut seen = 0;
     let mut ok = 0;
     for entry in std::fs::read_dir(&dir).expect("the seed corpus is committed") {

@@ -1,0 +1,385 @@
+//! Replays the committed fuzz corpora (`fuzz/corpus/<target>/`, minimised with
+//! `cargo fuzz cmin`) through the entry points the fuzz targets (`fuzz/fuzz_targets/`) call:
+//! no input may panic, errors must name the file, and the seeds (`seed_*`, valid files built
+//! in code by [`write_fuzz_seeds`]) must still read. Needs neither the network nor
+//! `../shared`.
+
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::path::{Path, PathBuf};
+
+use bitt_mesh::annotation::{FrameInfo, TwoHandScene, bitt_annotation_from_bytes, hands_json};
+use bitt_mesh::glam::{DMat3, DVec2, DVec3};
+use bitt_mesh::interhand::{InterHandDataset, InterHandPaths};
+use bitt_mesh::keypoints::{KeypointFormat, KeypointOptions, parse_keypoints};
+use bitt_mesh::mano::{from_safetensors, to_safetensors};
+use bitt_mesh::model::{MANO_PARENTS, NUM_BETAS, NUM_JOINTS, NUM_POSE, NUM_POSE_FEATURES};
+use bitt_mesh::{HandModel, HandParams, HandPose, PinholeCamera, Side, UvLayout};
+use bitt_tests::pickle_writer::{write_protocol2, write_protocol4};
+use bitt_tests::real_fixture::{self, AnnotationOptions};
+
+fn corpus_dir(target: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../fuzz/corpus")
+        .join(target)
+}
+
+/// Feeds every file of a corpus to `read` (which returns whether it read the file, and
+/// panics on nothing); checks that every seed reads and returns how many files there are.
+fn replay(target: &str, read: impl Fn(&[u8]) -> bool) -> usize {
+    let dir = corpus_dir(target);
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|e| e.unwrap().path())
+        .collect();
+    files.sort();
+    let mut seeds = 0;
+    for path in &files {
+        let bytes = std::fs::read(path).unwrap();
+        let ok = catch_unwind(AssertUnwindSafe(|| read(&bytes)))
+            .unwrap_or_else(|_| panic!("{target}: {} panicked", path.display()));
+        let name = path.file_name().unwrap().to_string_lossy();
+        if name.starts_with("seed_") {
+            assert!(ok, "{target}: seed {} no longer reads", path.display());
+            seeds += 1;
+        }
+    }
+    assert!(seeds >= 1, "{target}: no seed in {}", dir.display());
+    files.len()
+}
+
+#[test]
+fn from_bytes_corpus_replays() {
+    replay("from_bytes", |b| {
+        match bitt_pickle::from_bytes(b, "c.pkl") {
+            Ok(_) => true,
+            Err(e) => {
+                assert!(
+                    e.offset <= b.len() && e.to_string().contains("c.pkl"),
+                    "{e}"
+                );
+                false
+            }
+        }
+    });
+}
+
+#[test]
+fn torch_corpus_replays() {
+    replay("torch", |b| {
+        match bitt_pickle::torch_from_bytes(b, "c.pth") {
+            Ok(_) => true,
+            Err(e) => {
+                assert!(
+                    e.offset <= b.len() && e.to_string().contains("c.pth"),
+                    "{e}"
+                );
+                false
+            }
+        }
+    });
+}
+
+#[test]
+fn mano_safetensors_corpus_replays() {
+    let path = Path::new("c.safetensors");
+    replay("mano_safetensors", |b| match from_safetensors(b, path) {
+        Ok(model) => {
+            model.forward(&HandParams::mean_pose()).unwrap();
+            let back = from_safetensors(&to_safetensors(&model).unwrap(), path).unwrap();
+            assert_eq!(back, model);
+            true
+        }
+        Err(e) => {
+            assert!(e.to_string().contains("c.safetensors"), "{e}");
+            false
+        }
+    });
+}
+
+#[test]
+fn annotation_corpus_replays() {
+    let models = tiny_pair();
+    let path = Path::new("c.annotation");
+    replay("annotation", |b| {
+        match bitt_annotation_from_bytes(b, path, (256, 256)) {
+            Ok(scene) => {
+                let _ = scene.pose_in_camera(&models);
+                true
+            }
+            Err(e) => {
+                assert!(e.to_string().contains("c.annotation"), "{e}");
+                false
+            }
+        }
+    });
+}
+
+/// The fuzz target's input: the data, camera and MANO files joined by NUL bytes.
+fn interhand(b: &[u8]) -> bool {
+    let mut parts = b.splitn(3, |&x| x == 0);
+    let mut next = || parts.next().unwrap_or(&[]);
+    let (d, c, m) = (next(), next(), next());
+    let paths = InterHandPaths::new(Path::new("/nonexistent/bitt-corpus"), "test");
+    match InterHandDataset::from_json_bytes(paths, d, c, m) {
+        Ok(set) => {
+            let mut scenes = 0;
+            for capture in set.captures() {
+                for frame in set.frames(capture) {
+                    for entry in set.cameras(capture, frame) {
+                        scenes += usize::from(set.scene(entry).is_ok());
+                    }
+                }
+            }
+            scenes > 0
+        }
+        Err(e) => {
+            assert!(e.to_string().contains("InterHand2.6M_test_"), "{e}");
+            false
+        }
+    }
+}
+
+#[test]
+fn interhand_corpus_replays() {
+    replay("interhand", interhand);
+}
+
+/// The fuzz target's input: an options byte, then the file.
+fn keypoints(b: &[u8]) -> bool {
+    let Some((&sel, file)) = b.split_first() else {
+        return false;
+    };
+    let options = KeypointOptions {
+        format: match sel & 3 {
+            0 => None,
+            1 => Some(KeypointFormat::OpenPose),
+            2 => Some(KeypointFormat::MediaPipe),
+            _ => Some(KeypointFormat::Plain),
+        },
+        image_size: match (sel >> 2) & 3 {
+            0 => [0, 0],
+            1 => [640, 480],
+            2 => [1, 1],
+            _ => [u32::MAX, 3],
+        },
+        mirrored: sel & 16 != 0,
+    };
+    match parse_keypoints(file, Path::new("c.json"), &options) {
+        Ok(k) => {
+            let text = k.to_plain_json();
+            parse_keypoints(text.as_bytes(), Path::new("c.json"), &Default::default())
+                .unwrap_or_else(|e| panic!("{text}: {e}"));
+            true
+        }
+        Err(e) => {
+            assert!(e.to_string().starts_with("c.json: "), "{e}");
+            false
+        }
+    }
+}
+
+#[test]
+fn keypoints_corpus_replays() {
+    replay("keypoints", keypoints);
+}
+
+// -------------------------------------------------------------------------------------------
+// Seeds.
+
+/// A valid one-vertex model (MANO's joint tree): small enough to fuzz, cheap to pose.
+fn tiny_model(side: Side, uv: bool) -> HandModel {
+    HandModel {
+        side,
+        source: "tiny".into(),
+        v_template: vec![DVec3::new(0.01, 0.02, 0.03)],
+        faces: vec![[0, 0, 0]],
+        joint_regressor: vec![1.0; NUM_JOINTS],
+        skinning_weights: (0..NUM_JOINTS)
+            .map(|j| f64::from(u8::from(j == 0)))
+            .collect(),
+        parents: MANO_PARENTS.to_vec(),
+        shape_dirs: vec![0.01; 3 * NUM_BETAS],
+        pose_dirs: vec![0.001; 3 * NUM_POSE_FEATURES],
+        pose_pca_components: (0..NUM_POSE * NUM_POSE)
+            .map(|i| f64::from(u8::from(i % (NUM_POSE + 1) == 0)))
+            .collect(),
+        pose_pca_mean: vec![0.1; NUM_POSE],
+        fingertips: [0; 5],
+        uv: uv.then(|| UvLayout {
+            uvs: vec![DVec2::new(0.25, 0.75)],
+            faces: vec![[0, 0, 0]],
+        }),
+    }
+}
+
+fn tiny_pair() -> bitt_mesh::HandPair {
+    bitt_mesh::HandPair {
+        left: tiny_model(Side::Left, false),
+        right: tiny_model(Side::Right, false),
+    }
+}
+
+/// 21 keypoints along a line, as `[x, y, c]` text.
+fn points(x0: f64) -> Vec<String> {
+    (0..21)
+        .map(|i| {
+            format!(
+                "[{}, {}, 0.9]",
+                x0 + 3.0 * f64::from(i),
+                100.0 + f64::from(i)
+            )
+        })
+        .collect()
+}
+
+/// The seeds of every target: small valid inputs built here (never copied from licensed
+/// data).
+fn seeds() -> Vec<(&'static str, String, Vec<u8>)> {
+    let mut out = Vec::new();
+    // Torch: the project's own checkpoints (`crates/bitt-pickle/tests-data`).
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../crates/bitt-pickle/tests-data");
+    for name in ["torch_zip.pth", "torch_legacy.pth"] {
+        let bytes = std::fs::read(data.join(name)).unwrap();
+        out.push(("torch", format!("seed_{name}"), bytes));
+    }
+    // MANO safetensors: one-vertex models, with and without a UV layout.
+    for (side, uv) in [(Side::Right, false), (Side::Left, true)] {
+        let bytes = to_safetensors(&tiny_model(side, uv)).unwrap();
+        out.push((
+            "mano_safetensors",
+            format!("seed_{side}_uv{uv}.safetensors"),
+            bytes,
+        ));
+    }
+    // Annotations: the demo pickle layout (protocols 4 and 2, one hand missing) and a
+    // hands.json.
+    let ann = real_fixture::annotation(AnnotationOptions::default());
+    out.push((
+        "annotation",
+        "seed_demo_p4.pkl".into(),
+        write_protocol4(&ann),
+    ));
+    let one = real_fixture::annotation(AnnotationOptions {
+        no_left: true,
+        ..Default::default()
+    });
+    out.push((
+        "annotation",
+        "seed_right_only_p2.pkl".into(),
+        write_protocol2(&one),
+    ));
+    let scene = TwoHandScene {
+        left: Some(HandParams {
+            root_rotation: DMat3::from_rotation_z(0.2),
+            pose: HandPose::AxisAngle(vec![0.01; NUM_POSE]),
+            betas: vec![0.1; NUM_BETAS],
+            trans: DVec3::new(0.1, 0.0, 0.0),
+        }),
+        right: None,
+        camera: PinholeCamera::new(
+            DMat3::from_cols_array(&[300.0, 0.0, 0.0, 0.0, 300.0, 0.0, 64.0, 60.0, 1.0]),
+            DMat3::IDENTITY,
+            DVec3::new(0.0, 0.0, 0.6),
+            128,
+            120,
+        )
+        .unwrap(),
+        frame: FrameInfo::default(),
+    };
+    let text = hands_json(&scene, &tiny_pair()).unwrap();
+    out.push(("annotation", "seed_hands.json".into(), text.into_bytes()));
+    // InterHand: the miniature dataset of the InterHand tests, and a one-image one.
+    let root = real_fixture::scratch("fuzz-seeds");
+    real_fixture::write_mini_interhand(&root);
+    let paths = InterHandPaths::new(&root, "test");
+    let mut joined = Vec::new();
+    for (i, p) in [&paths.data, &paths.camera, &paths.mano]
+        .into_iter()
+        .enumerate()
+    {
+        if i > 0 {
+            joined.push(0);
+        }
+        joined.extend(std::fs::read(p).unwrap());
+    }
+    std::fs::remove_dir_all(&root).ok();
+    out.push(("interhand", "seed_mini.json".into(), joined));
+    let pose: Vec<String> = (0..48)
+        .map(|i| format!("{}", 0.01 * f64::from(i)))
+        .collect();
+    let hand = format!(
+        "{{\"pose\":[{}],\"shape\":[0,0,0,0,0,0,0,0,0,0],\"trans\":[0,0,0]}}",
+        pose.join(",")
+    );
+    let one = format!(
+        "{{\"images\":[{{\"id\":1,\"file_name\":\"a.jpg\",\"width\":334,\"height\":512,\
+         \"capture\":7,\"camera\":400262,\"frame_idx\":3}}],\"annotations\":[{{\"image_id\":1,\
+         \"bbox\":[1,2,30,40],\"hand_type\":\"interacting\",\"hand_type_valid\":true}}]}}\0\
+         {{\"7\":{{\"campos\":{{\"400262\":[100,-50,1000]}},\"camrot\":{{\"400262\":\
+         [[1,0,0],[0,1,0],[0,0,1]]}},\"focal\":{{\"400262\":[1200,1210]}},\"princpt\":\
+         {{\"400262\":[167,256]}}}}}}\0{{\"7\":{{\"3\":{{\"left\":{hand},\"right\":{hand}}}}}}}"
+    );
+    out.push(("interhand", "seed_one.json".into(), one.into_bytes()));
+    // Keypoints (first byte: the options, 0 = guess the format, no image size).
+    let (l, r) = (points(100.0), points(300.0));
+    let openpose = format!(
+        "{{\"version\":1.3,\"people\":[{{\"hand_left_keypoints_2d\":[{}],\
+         \"hand_right_keypoints_2d\":[{}]}}]}}",
+        l.join(",").replace(['[', ']'], ""),
+        r.join(",").replace(['[', ']'], "")
+    );
+    let plain = format!("{{\"left\": [{}], \"right\": null}}", l.join(", "));
+    let lms: Vec<String> = (0..21)
+        .map(|i| {
+            format!(
+                "{{\"x\": {}, \"y\": 0.5, \"z\": -0.01}}",
+                0.02 * f64::from(i)
+            )
+        })
+        .collect();
+    let mediapipe = format!(
+        "{{\"handedness\": [[{{\"index\": 0, \"score\": 0.97, \"display_name\": \"\", \
+         \"category_name\": \"Left\"}}]], \"hand_landmarks\": [[{}]]}}",
+        lms.join(", ")
+    );
+    for (name, sel, text) in [
+        ("openpose", 0u8, openpose),
+        ("plain", 0, plain),
+        ("mediapipe", 4, mediapipe), // 640 x 480, guessed format
+    ] {
+        let bytes = [vec![sel], text.into_bytes()].concat();
+        out.push(("keypoints", format!("seed_{name}.json"), bytes));
+    }
+    out
+}
+
+/// Writes the seeds into the corpora (run on demand:
+/// `cargo test --release -p bitt-tests --test fuzz_corpus write_fuzz_seeds -- --ignored`);
+/// the `from_bytes` seeds come from `bitt-pickle`'s `write_fuzz_seed_corpus`.
+#[test]
+#[ignore = "writes files into fuzz/corpus; run on demand"]
+fn write_fuzz_seeds() {
+    for (target, name, bytes) in seeds() {
+        let dir = corpus_dir(target);
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join(name), bytes).unwrap();
+    }
+}
+
+/// The seeds are valid inputs of their readers (so the fuzzers start from real structure).
+#[test]
+fn fuzz_seeds_read() {
+    for (target, name, bytes) in seeds() {
+        let ok = match target {
+            "torch" => bitt_pickle::torch_from_bytes(&bytes, &name).is_ok(),
+            "mano_safetensors" => from_safetensors(&bytes, Path::new(&name)).is_ok(),
+            "annotation" => bitt_annotation_from_bytes(&bytes, Path::new(&name), (256, 256))
+                .map_err(|e| panic!("{name}: {e}"))
+                .is_ok(),
+            "interhand" => interhand(&bytes),
+            "keypoints" => keypoints(&bytes),
+            other => panic!("unknown target {other}"),
+        };
+        assert!(ok, "{target}: seed {name} does not read");
+    }
+}
