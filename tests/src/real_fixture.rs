@@ -34,6 +34,9 @@ pub struct AnnotationOptions {
     pub nan: bool,
     /// Drops the left hand (`None`, as the reference writes single-hand frames).
     pub no_left: bool,
+    /// Added to the left hand's translation (metres, camera frame): hands off the image,
+    /// far away or behind the camera.
+    pub left_offset: [f32; 3],
 }
 
 /// A BiTT annotation (the demo `NN.pkl` layout; see `shared/data/interhand_demo/README.md`)
@@ -50,6 +53,11 @@ pub fn annotation(opts: AnnotationOptions) -> PyValue {
         let mut trans = vec![x as f32, 0.0, 0.0];
         if opts.nan && !left {
             trans[1] = f32::NAN;
+        }
+        if left {
+            for (t, o) in trans.iter_mut().zip(opts.left_offset) {
+                *t += o;
+            }
         }
         PyValue::Dict(vec![
             (s("R"), f32s(&[1, 3, 3], rows(turn * root))),

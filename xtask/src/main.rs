@@ -11,13 +11,19 @@
 //! - `synth [ARGS]`: synthetic scenes (default: the 24-scene benchmark), forwarded to `bitt`.
 //! - `metrics A.png B.png [--mask M] [--lpips W]`: one pair's image metrics (JSON), and
 //!   `convert-lpips --lin vgg.pth [--vgg vgg16-397923af.pth]`: LPIPS weights; forwarded.
-//! - `fuzz [--seconds N]`: fuzz the pickle reader with cargo-fuzz.
+//! - `fuzz [TARGET|all] [--seconds N | --runs N]`: the cargo-fuzz targets of `fuzz/` (file
+//!   readers: pickles, torch checkpoints, MANO safetensors, annotations, InterHand, keypoints).
 //! - `nets [--preset P]`: the networks' parameter counts and output shapes (JSON).
 //! - `bench btr|albedo|nets [--preset P]`: burn vs PyTorch timings, side by side.
+//! - `slurm-check [--work DIR] [--bitt PATH]`: the sharded evaluation as a Slurm job array on a
+//!   one-node cluster started here (installs slurm-wlm and munge; not part of CI), compared
+//!   with a single-process run; see `docs/slurm-check.md`.
 
 mod bench;
 mod bench_render;
+mod fuzz;
 mod nets;
+mod slurm;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitStatus};
@@ -141,10 +147,22 @@ fn e2e() -> Result<()> {
     let bin = build_bitt()?;
     let mut results = Vec::new();
     for device in ["flex", "ndarray", "wgpu"] {
+        // Without XDG_RUNTIME_DIR, as in many CI shells and services: `bitt` must neither
+        // need it nor print EGL's complaints about it, and it names the wgpu adapter.
         let out = Command::new(&bin)
             .args(["backend-check", "--device", device])
-            .env("XDG_RUNTIME_DIR", runtime_dir())
+            .env_remove("XDG_RUNTIME_DIR")
             .output()?;
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        if stderr.contains("XDG_RUNTIME_DIR") {
+            bail!("backend check on {device} printed warnings about XDG_RUNTIME_DIR:\n{stderr}");
+        }
+        if device == "wgpu" {
+            match stderr.lines().find(|l| l.starts_with("wgpu adapter:")) {
+                Some(line) => println!("e2e {line}"),
+                None => bail!("backend check on wgpu did not name its adapter:\n{stderr}"),
+            }
+        }
         if !out.status.success() {
             bail!(
                 "backend check on {device} failed ({}):\n{}",
@@ -367,38 +385,6 @@ fn render_on_backends(bin: &Path, scratch: &Path) -> Result<f64> {
     Ok(mean)
 }
 
-fn fuzz(args: &[String]) -> Result<()> {
-    let seconds = match args {
-        [] => 60,
-        [flag, n] if flag == "--seconds" => n.parse().context("--seconds takes a number")?,
-        _ => bail!("usage: cargo xtask fuzz [--seconds N]"),
-    };
-    let have = Command::new("cargo")
-        .args(["fuzz", "--version"])
-        .output()
-        .map(|o| o.status.success())
-        .unwrap_or(false);
-    if !have {
-        bail!("cargo-fuzz is not installed: `cargo install cargo-fuzz`");
-    }
-    let dir = root().join("crates/bitt-pickle/fuzz");
-    // New inputs go to a scratch corpus (ignored by git); the committed seeds stay small.
-    let work = dir.join("target/corpus-work");
-    std::fs::create_dir_all(&work)?;
-    let status = Command::new("cargo")
-        .current_dir(&dir)
-        // cargo-fuzz needs nightly flags; the stable toolchain accepts them with this switch.
-        .env("RUSTC_BOOTSTRAP", "1")
-        .args(["fuzz", "run", "from_bytes"])
-        .arg(&work)
-        .arg("corpus/from_bytes")
-        .arg("--")
-        .arg(format!("-max_total_time={seconds}"))
-        .arg("-print_final_stats=1")
-        .status()?;
-    check(status, "cargo fuzz")
-}
-
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some((cmd, rest)) = args.split_first() else {
@@ -426,9 +412,10 @@ fn main() -> Result<()> {
             e2e()
         }
         "e2e" => e2e(),
-        "fuzz" => fuzz(rest),
+        "fuzz" => fuzz::fuzz(rest),
         "nets" => nets::nets(rest),
         "bench" => bench::bench(rest),
+        "slurm-check" => slurm::slurm_check(rest),
         other => {
             bail!("unknown command `{other}`; try demo, test, e2e, pose-hands, convert-mano, fuzz")
         }

@@ -1,5 +1,7 @@
 //! Choosing a burn device by name (binaries only; libraries take `&Device`).
 
+use std::sync::OnceLock;
+
 use burn::tensor::{Device, DeviceKind};
 
 /// The backends this binary is built with.
@@ -23,10 +25,46 @@ impl DeviceName {
             DeviceName::Flex => Device::flex(),
             #[allow(deprecated)]
             DeviceName::Ndarray => Device::ndarray(),
-            DeviceName::Wgpu => Device::wgpu(DeviceKind::DefaultDevice),
+            DeviceName::Wgpu => wgpu()?,
             DeviceName::Cuda => cuda()?,
         })
     }
+}
+
+/// The wgpu device, set up once per process, its adapter named on stderr.
+///
+/// Off macOS the graphics API is pinned to Vulkan (a GPU's driver, or Mesa's lavapipe):
+/// `Auto` would go on to set up OpenGL (EGL) and others when Vulkan has only a software
+/// adapter. Where Vulkan has no adapter at all, `Auto` chooses.
+fn wgpu() -> anyhow::Result<Device> {
+    static WGPU: OnceLock<Result<Device, String>> = OnceLock::new();
+    WGPU.get_or_init(|| {
+        use burn::tensor::wgpu::WgpuBackend;
+        let pinned = if cfg!(target_os = "macos") {
+            Err("Metal is chosen by Auto".to_string())
+        } else {
+            Device::wgpu_options()
+                .device_kind(DeviceKind::DefaultDevice)
+                .graphics_api(WgpuBackend::Vulkan)
+                .init_with_setup()
+                .map_err(|e| e.to_string())
+        };
+        let (device, setup) = match pinned {
+            Ok(found) => found,
+            Err(vulkan) => Device::wgpu_options()
+                .device_kind(DeviceKind::DefaultDevice)
+                .init_with_setup()
+                .map_err(|e| format!("no wgpu adapter: {e} (Vulkan: {vulkan})"))?,
+        };
+        let info = setup.adapter.get_info();
+        eprintln!(
+            "wgpu adapter: {} ({:?}, {:?}, driver {} {})",
+            info.name, setup.backend, info.device_type, info.driver, info.driver_info
+        );
+        Ok(device)
+    })
+    .clone()
+    .map_err(|e| anyhow::anyhow!(e))
 }
 
 #[cfg(feature = "cuda")]

@@ -86,13 +86,16 @@ impl KeypointArgs {
             Some(path) => {
                 let text = std::fs::read_to_string(path)
                     .with_context(|| format!("reading {}", path.display()))?;
-                serde_json::from_str(&text).with_context(|| {
-                    format!("{}: not a keypoint-fit configuration", path.display())
-                })?
+                bitt::config::read_config(&text, path, "a keypoint-fit configuration")?
             }
             None => FitConfig::default(),
         };
-        config.validate()?;
+        if let Err(e) = config.validate() {
+            match &self.fit_config {
+                Some(path) => bail!("{}: {e}", path.display()),
+                None => return Err(e.into()),
+            }
+        }
         Ok(config)
     }
 }

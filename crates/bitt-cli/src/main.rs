@@ -113,7 +113,24 @@ enum Command {
     },
 }
 
+/// Mesa's device-selection Vulkan layer (an implicit layer on Linux) connects to a Wayland
+/// display whenever an instance enables Wayland surfaces, as wgpu's does, and prints `error:
+/// XDG_RUNTIME_DIR is invalid` each time where there is none (services, CI, Slurm jobs).
+/// wgpu picks its adapter itself, so the layer is switched off there (`NODEVICE_SELECT=1`,
+/// the layer's own switch); a user's explicit setting is kept.
+#[allow(unsafe_code)]
+fn quiet_vulkan_layers() {
+    let runtime_dir =
+        std::env::var_os("XDG_RUNTIME_DIR").is_some_and(|d| std::path::Path::new(&d).is_dir());
+    if !runtime_dir && std::env::var_os("NODEVICE_SELECT").is_none() {
+        // SAFETY: the first thing `main` does, before any other thread exists, so nothing
+        // reads the environment concurrently.
+        unsafe { std::env::set_var("NODEVICE_SELECT", "1") };
+    }
+}
+
 fn main() -> Result<()> {
+    quiet_vulkan_layers();
     let cli = Cli::parse();
     match cli.command {
         Command::PoseHands(args) => pose_hands::run(&args),

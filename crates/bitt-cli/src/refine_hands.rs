@@ -121,8 +121,12 @@ pub(crate) fn refine_config(
         Some(path) => {
             let text = std::fs::read_to_string(path)
                 .with_context(|| format!("reading {}", path.display()))?;
-            serde_json::from_str(&text)
-                .with_context(|| format!("{}: not a refinement configuration", path.display()))?
+            let config: RefineConfig =
+                bitt::config::read_config(&text, path, "a refinement configuration")?;
+            if let Err(e) = config.validate() {
+                bail!("{}: {e}", path.display());
+            }
+            config
         }
         None => RefineConfig::default(),
     };

@@ -114,7 +114,13 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
 
 /// Parses `--light`: inline JSON when it starts with `{`, else a JSON file.
 pub fn parse_light(arg: &str) -> Result<LightValues> {
-    let (text, source) = if arg.trim_start().starts_with('{') {
+    // Inline JSON (an object, or anything else that parses as JSON and is not a file's
+    // name) is read as such; `[1, 2]` is a wrong light, not a file name.
+    let t = arg.trim_start();
+    let inline = t.starts_with('{')
+        || t.starts_with('[')
+        || (!Path::new(arg).exists() && serde_json::from_str::<serde_json::Value>(arg).is_ok());
+    let (text, source) = if inline {
         (arg.to_string(), "--light".to_string())
     } else {
         let text = std::fs::read_to_string(arg)
@@ -729,6 +735,14 @@ mod tests {
         assert!(e.contains("ambient") && e.contains("finite"), "{e}");
         let e = format!("{:#}", parse_light("/nonexistent/light.json").unwrap_err());
         assert!(e.contains("/nonexistent/light.json"), "{e}");
+        // Inline JSON that is not a light object is named as --light, not read as a file.
+        for wrong in ["[1,2]", " [1, 2, 3]", "42", "\"sun\""] {
+            let e = format!("{:#}", parse_light(wrong).unwrap_err());
+            assert!(
+                e.starts_with("--light: expected JSON") && !e.contains("cannot read"),
+                "{wrong}: {e}"
+            );
+        }
     }
 
     #[test]

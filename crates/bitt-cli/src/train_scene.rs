@@ -31,6 +31,7 @@ use bitt::refine::{
     MeshRefine, RefineConfig, RefineObserver, Refinement, pca_pose_notes, refine_synthetic,
 };
 use bitt::run::{files, synthetic_trainer, texture_prior, write_run, write_training_refinement};
+use bitt::trainer::previous_checkpoint_path;
 use bitt::{Observer, Progress, TrainConfig, Trainer};
 use bitt_mesh::interhand::{
     InterHandDataset, InterHandSelection, PAPER_NOVEL_POSES, PAPER_NOVEL_VIEWS,
@@ -556,9 +557,18 @@ fn resumed(
         config.iterations = n;
         config.validate()?;
     }
-    let ckpt = dir.join(files::CHECKPOINT);
-    let checkpoint = Checkpoint::load(&ckpt)
-        .with_context(|| format!("--resume {}: no usable checkpoint", dir.display()))?;
+    // The run's input: `input.json` for real data, `scene/` for a synthetic scene.
+    let real = RealInput::is_real_run(dir);
+    if !real && !dir.join(files::SCENE).join("scene.json").is_file() {
+        bail!(
+            "--resume {}: the run's input is missing: neither {} (real data) nor {} \
+             (a synthetic scene) is there",
+            dir.display(),
+            dir.join(bitt::real::files::INPUT).display(),
+            dir.join(files::SCENE).join("scene.json").display()
+        );
+    }
+    let (checkpoint, previous) = load_checkpoints(dir)?;
     // Temporaries of writes a killed process never finished (it is a run folder of ours).
     for path in bitt_mesh::export::remove_stale_temporaries(dir)? {
         eprintln!("removed {}, left by an interrupted write", path.display());
@@ -575,7 +585,7 @@ fn resumed(
         );
     }
     let cache = Some(args.cache.as_path());
-    let (mut trainer, input) = if RealInput::is_real_run(dir) {
+    let (mut trainer, input) = if real {
         let (input, scene, trainer) = RealInput::resume_trainer(dir, config, cache, device)
             .with_context(|| format!("--resume {}: the run's real input", dir.display()))?;
         (trainer, Input::Real(Box::new(input), Box::new(scene)))
@@ -590,12 +600,45 @@ fn resumed(
         let trainer = synthetic_trainer(&scene, &config, &pca, device)?;
         (trainer, Input::Synthetic(Box::new(scene)))
     };
-    trainer.restore(&checkpoint)?;
+    trainer.resume_from(&checkpoint, previous)?;
     eprintln!(
         "resuming at iteration {} of {}",
         checkpoint.iteration, trainer.config.iterations
     );
     Ok((trainer, input))
+}
+
+/// A run's latest checkpoint and the one before it. A latest file that is missing or fails
+/// its checks is reported, and the previous one (kept by the trainer) is resumed instead.
+fn load_checkpoints(dir: &Path) -> Result<(Checkpoint, Option<Checkpoint>)> {
+    let latest_path = dir.join(files::CHECKPOINT);
+    let previous_path = previous_checkpoint_path(&latest_path);
+    let previous = if previous_path.is_file() {
+        match Checkpoint::load(&previous_path) {
+            Ok(c) => Some(c),
+            Err(e) => {
+                eprintln!("warning: ignoring the previous checkpoint: {e}");
+                None
+            }
+        }
+    } else {
+        None
+    };
+    match Checkpoint::load(&latest_path) {
+        Ok(latest) => Ok((latest, previous)),
+        Err(e) => match previous {
+            Some(p) => {
+                eprintln!(
+                    "warning: {e}\nresuming from the previous checkpoint {} (iteration {}) instead",
+                    previous_path.display(),
+                    p.iteration
+                );
+                Ok((p, None))
+            }
+            None => Err(anyhow::Error::new(e)
+                .context(format!("--resume {}: no usable checkpoint", dir.display()))),
+        },
+    }
 }
 
 /// The configuration of `--config FILE` (a full `TrainConfig`), else the named preset.
@@ -655,9 +698,11 @@ pub(crate) fn sources(
 }
 
 /// Names a run writes at the top of its folder.
-const RUN_NAMES: [&str; 18] = [
+const RUN_NAMES: [&str; 20] = [
     files::CONFIG,
     files::CHECKPOINT,
+    files::CHECKPOINT_PREVIOUS,
+    files::TIMING,
     files::METRICS,
     files::LIGHT,
     files::REPORT,
@@ -703,7 +748,7 @@ fn out_folder(dir: &Path) -> Result<OutFolder> {
     if !dir.is_dir() {
         bail!("{}: exists and is not a folder", dir.display());
     }
-    if dir.join(files::CHECKPOINT).exists() {
+    if dir.join(files::CHECKPOINT).exists() || dir.join(files::CHECKPOINT_PREVIOUS).exists() {
         return Ok(OutFolder::Run);
     }
     let names: Vec<String> = std::fs::read_dir(dir)
@@ -787,9 +832,43 @@ fn fresh_out(out: &Path, default: &Path, force: bool) -> Result<PathBuf> {
     Ok(next)
 }
 
+/// Refuses path arguments that are not valid UTF-8 before anything is read or written: a
+/// run records its inputs' paths in `input.json` and `config.json` (JSON text).
+fn check_utf8_paths(args: &TrainSceneArgs) -> Result<()> {
+    let paths = [
+        ("--scene", &args.scene),
+        ("--image", &args.image),
+        ("--annotation", &args.annotation),
+        ("--keypoints", &args.keypoints),
+        ("--mask", &args.mask),
+        ("--interhand", &args.interhand),
+        ("--config", &args.config),
+        ("--resume", &args.resume),
+        ("--refine-config", &args.refine_config),
+        ("--model-dir", &args.hands.model_dir),
+        ("--html-dir", &args.hands.html_dir),
+    ];
+    let fixed = [("--out", &args.out), ("--cache", &args.cache)];
+    let all = paths
+        .iter()
+        .filter_map(|(flag, p)| p.as_ref().map(|p| (*flag, p)))
+        .chain(fixed.iter().map(|(flag, p)| (*flag, *p)));
+    for (flag, path) in all {
+        if path.to_str().is_none() {
+            bail!(
+                "{flag} {}: the path is not valid UTF-8; a run records its input paths as JSON \
+                 text. Rename it, or link it under a UTF-8 name",
+                path.display()
+            );
+        }
+    }
+    Ok(())
+}
+
 /// `bitt train-scene`.
 pub fn run(args: &TrainSceneArgs) -> Result<()> {
     let started = Instant::now();
+    check_utf8_paths(args)?;
     let device = args.device.device()?.autodiff();
     let (out, mut trainer, input) = match &args.resume {
         Some(dir) => {
@@ -857,6 +936,7 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
         done_before: trainer.iteration,
         stop,
     };
+    let mut gave_up = None;
     match trainer.train(Some(&out.join(files::CHECKPOINT)), &mut bar) {
         Err(bitt::BittError::Interrupted(i)) => {
             eprintln!(
@@ -865,6 +945,13 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
                 out.display()
             );
             std::process::exit(130);
+        }
+        Err(e @ bitt::BittError::RecoveryExhausted { .. }) => {
+            eprintln!(
+                "\nerror: {e}\nwriting the results of that state (iteration {}) anyway",
+                trainer.iteration
+            );
+            gave_up = Some(e);
         }
         r => r?,
     }
@@ -890,6 +977,15 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
         real_scores.as_ref(),
         started.elapsed().as_secs_f64(),
     );
+    if let Some(e) = gave_up {
+        bail!(
+            "training did not finish: {e}. The results in {} are those of iteration {}; \
+             `--resume {}` continues from there at the lowered learning rate",
+            out.display(),
+            trainer.iteration,
+            out.display()
+        );
+    }
     Ok(())
 }
 
@@ -1149,6 +1245,64 @@ mod tests {
             serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap())
                 .unwrap();
         assert_eq!(metrics["history"].as_array().unwrap().len(), 3);
+        // An uninterrupted run of the same 3 iterations writes the same metrics.json, byte
+        // for byte (the history read back from the checkpoint is bit-exact; timings are in
+        // timing.json), and the same textures and light.
+        let straight = dir.join("straight");
+        let mut uninterrupted: Vec<&str> = common
+            .iter()
+            .map(|a| if *a == s(&out) { s(&straight) } else { *a })
+            .collect();
+        uninterrupted.extend(["--iterations", "3"]);
+        run(&args(&uninterrupted)).unwrap();
+        for f in [
+            "metrics.json",
+            "light.json",
+            "textures/left_fine.png",
+            "textures/right_fine.png",
+        ] {
+            let (a, b) = (out.join(f), straight.join(f));
+            assert!(
+                std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap(),
+                "{f} differs between the resumed and the uninterrupted run"
+            );
+        }
+        assert!(out.join("timing.json").is_file());
+        // A checkpoint with a flipped byte is refused, naming it, and the previous one is
+        // resumed instead; with neither usable, the resume fails naming the file.
+        let ckpt = out.join(files::CHECKPOINT);
+        let mut bytes = std::fs::read(&ckpt).unwrap();
+        let last = bytes.len() - 3;
+        bytes[last] ^= 0x40;
+        std::fs::write(&ckpt, &bytes).unwrap();
+        let (c, p) = load_checkpoints(&out).unwrap();
+        assert!(
+            p.is_none() && c.iteration < 3,
+            "resumed from {}",
+            c.iteration
+        );
+        std::fs::remove_file(out.join(files::CHECKPOINT_PREVIOUS)).unwrap();
+        let e = format!("{:#}", load_checkpoints(&out).unwrap_err());
+        assert!(
+            e.contains("checkpoint.safetensors") && e.contains("corrupt"),
+            "{e}"
+        );
+        std::fs::write(
+            &ckpt,
+            std::fs::read(straight.join(files::CHECKPOINT)).unwrap(),
+        )
+        .unwrap();
+        // A run whose input record was deleted names what is missing.
+        let moved = out.join("input.json.bak");
+        std::fs::rename(out.join("input.json"), &moved).unwrap();
+        let e = format!("{:#}", run(&resume).unwrap_err());
+        assert!(
+            e.contains("input.json")
+                && e.contains("input is missing")
+                && !e.contains("scene/scene.json is not"),
+            "{e}"
+        );
+        std::fs::rename(&moved, out.join("input.json")).unwrap();
         // render-avatar in several poses.
         let render = |extra: &[&str], name: &str| {
             let png = dir.join(name);
@@ -1385,6 +1539,38 @@ mod tests {
             .is_err()
         );
         assert!(Cli::try_parse_from(["bitt", "--capture", "0"]).is_err());
+        // A path that is not UTF-8 is refused before anything is written.
+        #[cfg(unix)]
+        {
+            use std::os::unix::ffi::OsStringExt;
+            let odd = std::ffi::OsString::from_vec(
+                [dir.as_os_str().as_encoded_bytes(), b"/caf\xe9.jpg"].concat(),
+            );
+            std::fs::copy(&img, &odd).unwrap();
+            let all: Vec<std::ffi::OsString> = [
+                "bitt",
+                "--preset",
+                "tiny",
+                "--annotation",
+                s(&pkl),
+                "--out",
+                s(&out),
+                "--image",
+            ]
+            .into_iter()
+            .map(Into::into)
+            .chain([odd])
+            .collect();
+            let e = format!(
+                "{:#}",
+                run(&Cli::try_parse_from(all).unwrap().args).unwrap_err()
+            );
+            assert!(
+                e.contains("--image") && e.contains("not valid UTF-8"),
+                "{e}"
+            );
+            assert!(!out.exists(), "a refused run created {}", out.display());
+        }
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

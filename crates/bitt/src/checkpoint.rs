@@ -1,7 +1,15 @@
 //! Checkpoints: network parameters, Adam moments and the run's progress in one safetensors
-//! file, written atomically, restored exactly.
+//! file, written atomically, checksummed, restored exactly.
+//!
+//! Format `bitt-checkpoint-2`: tensors `param.i`, `adam_m.i`, `adam_v.i` (F32), `history`
+//! (F64 `[iterations, 7]`: the six loss terms and the total, bit-exact) and `progress` (F64
+//! `[lr_scale, seconds]`); metadata `iteration`, `parameters`, `adam_steps`, `events`,
+//! `tensors` (how many), `checksums` (XXH3-64 of every tensor's bytes) and `metadata_checksum`
+//! (XXH3-64 of the other metadata entries). Every count, checksum and shape is verified on
+//! load, and what is wrong is named. Files of the earlier format `bitt-checkpoint-1`
+//! (progress as JSON text, no checksums) are still read.
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
 use safetensors::{Dtype, SafeTensors};
@@ -10,7 +18,13 @@ use crate::BittError;
 use crate::losses::LossTerms;
 
 /// The `format` metadata of a checkpoint file.
-pub const CHECKPOINT_FORMAT: &str = "bitt-checkpoint-1";
+pub const CHECKPOINT_FORMAT: &str = "bitt-checkpoint-2";
+
+/// The format before checksums (read, never written).
+const CHECKPOINT_FORMAT_1: &str = "bitt-checkpoint-1";
+
+/// Values per `history` row: the six loss terms, then the total.
+const HISTORY_COLUMNS: usize = 7;
 
 /// One flattened tensor: shape and values.
 pub type HostTensor = (Vec<usize>, Vec<f32>);
@@ -28,7 +42,7 @@ pub struct Checkpoint {
     pub events: Vec<(usize, String)>,
     /// Network parameters in visiting order.
     pub parameters: Vec<HostTensor>,
-    /// Adam steps per parameter.
+    /// Adam steps per parameter (empty before the first step).
     pub adam_steps: Vec<u64>,
     /// Adam first moments (flattened; `None` before the first gradient).
     pub adam_m: Vec<Option<Vec<f32>>>,
@@ -42,67 +56,132 @@ fn f32_bytes(values: &[f32]) -> Vec<u8> {
     values.iter().flat_map(|v| v.to_le_bytes()).collect()
 }
 
+fn f64_bytes(values: &[f64]) -> Vec<u8> {
+    values.iter().flat_map(|v| v.to_le_bytes()).collect()
+}
+
+/// The checksum of a tensor's bytes (or of the metadata), as 16 hex digits.
+fn checksum(bytes: &[u8]) -> String {
+    format!("{:016x}", xxhash_rust::xxh3::xxh3_64(bytes))
+}
+
+/// The checksum of every metadata entry except `metadata_checksum` itself, in key order.
+fn metadata_checksum(meta: &HashMap<String, String>) -> String {
+    let sorted: BTreeMap<&String, &String> = meta
+        .iter()
+        .filter(|(k, _)| k.as_str() != "metadata_checksum")
+        .collect();
+    let mut text = String::new();
+    for (k, v) in sorted {
+        text.push_str(k);
+        text.push('\0');
+        text.push_str(v);
+        text.push('\0');
+    }
+    checksum(text.as_bytes())
+}
+
+impl LossTerms {
+    fn row(&self) -> [f64; HISTORY_COLUMNS] {
+        [
+            self.rec_fine,
+            self.rec_coarse,
+            self.rec_albedo,
+            self.nv,
+            self.alb,
+            self.sym,
+            self.total,
+        ]
+    }
+}
+
 impl Checkpoint {
     /// Writes the checkpoint to `path` atomically.
     pub fn save(&self, path: &Path) -> Result<(), BittError> {
-        let mut entries: Vec<(String, Vec<usize>, Vec<u8>)> = Vec::new();
+        let mut entries: Vec<(String, Dtype, Vec<usize>, Vec<u8>)> = Vec::new();
         for (i, (shape, values)) in self.parameters.iter().enumerate() {
-            entries.push((format!("param.{i}"), shape.clone(), f32_bytes(values)));
+            entries.push((
+                format!("param.{i}"),
+                Dtype::F32,
+                shape.clone(),
+                f32_bytes(values),
+            ));
         }
         for (name, list) in [("adam_m", &self.adam_m), ("adam_v", &self.adam_v)] {
             for (i, m) in list.iter().enumerate() {
                 if let Some(m) = m {
-                    entries.push((format!("{name}.{i}"), vec![m.len()], f32_bytes(m)));
+                    entries.push((
+                        format!("{name}.{i}"),
+                        Dtype::F32,
+                        vec![m.len()],
+                        f32_bytes(m),
+                    ));
                 }
             }
         }
-        let mut views = Vec::with_capacity(entries.len());
-        for (name, shape, bytes) in &entries {
-            let view = safetensors::tensor::TensorView::new(Dtype::F32, shape.clone(), bytes)
-                .map_err(|e| BittError::corrupt(path, format!("cannot encode {name}: {e}")))?;
-            views.push((name.clone(), view));
-        }
+        let history: Vec<f64> = self.history.iter().flat_map(|h| h.row()).collect();
+        entries.push((
+            "history".into(),
+            Dtype::F64,
+            vec![self.history.len(), HISTORY_COLUMNS],
+            f64_bytes(&history),
+        ));
+        entries.push((
+            "progress".into(),
+            Dtype::F64,
+            vec![2],
+            f64_bytes(&[self.lr_scale, self.seconds]),
+        ));
+        let checksums: BTreeMap<&str, String> = entries
+            .iter()
+            .map(|(name, _, _, bytes)| (name.as_str(), checksum(bytes)))
+            .collect();
         let json = |v: serde_json::Result<String>| {
             v.map_err(|e| BittError::corrupt(path, format!("cannot encode metadata: {e}")))
         };
-        let metadata = HashMap::from([
+        let mut metadata = HashMap::from([
             ("format".to_string(), CHECKPOINT_FORMAT.to_string()),
             ("iteration".to_string(), self.iteration.to_string()),
-            (
-                "lr_scale".to_string(),
-                json(serde_json::to_string(&self.lr_scale))?,
-            ),
-            (
-                "seconds".to_string(),
-                json(serde_json::to_string(&self.seconds))?,
-            ),
             ("parameters".to_string(), self.parameters.len().to_string()),
+            ("tensors".to_string(), entries.len().to_string()),
             (
                 "adam_steps".to_string(),
                 json(serde_json::to_string(&self.adam_steps))?,
             ),
             (
-                "history".to_string(),
-                json(serde_json::to_string(&self.history))?,
-            ),
-            (
                 "events".to_string(),
                 json(serde_json::to_string(&self.events))?,
             ),
+            (
+                "checksums".to_string(),
+                json(serde_json::to_string(&checksums))?,
+            ),
         ]);
+        metadata.insert("metadata_checksum".into(), metadata_checksum(&metadata));
+        let mut views = Vec::with_capacity(entries.len());
+        for (name, dtype, shape, bytes) in &entries {
+            let view = safetensors::tensor::TensorView::new(*dtype, shape.clone(), bytes)
+                .map_err(|e| BittError::corrupt(path, format!("cannot encode {name}: {e}")))?;
+            views.push((name.clone(), view));
+        }
         let bytes = safetensors::serialize(views, Some(metadata))
             .map_err(|e| BittError::corrupt(path, format!("cannot encode: {e}")))?;
         bitt_mesh::export::write_atomically(path, &bytes)?;
         Ok(())
     }
 
-    /// Reads a checkpoint written by [`Checkpoint::save`].
+    /// Reads a checkpoint written by [`Checkpoint::save`], verifying its checksums and counts.
     pub fn load(path: &Path) -> Result<Self, BittError> {
         let bytes = std::fs::read(path).map_err(|e| BittError::io(path, e))?;
+        Self::from_bytes(&bytes, path)
+    }
+
+    /// [`Checkpoint::load`] of a file's bytes; `path` names it in errors.
+    pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<Self, BittError> {
         let bad = |m: String| BittError::corrupt(path, m);
-        let st = SafeTensors::deserialize(&bytes)
+        let st = SafeTensors::deserialize(bytes)
             .map_err(|e| bad(format!("not a safetensors file: {e}")))?;
-        let (_, meta) = SafeTensors::read_metadata(&bytes)
+        let (_, meta) = SafeTensors::read_metadata(bytes)
             .map_err(|e| bad(format!("bad safetensors header: {e}")))?;
         let meta = meta.metadata().clone().unwrap_or_default();
         let get = |k: &str| {
@@ -111,11 +190,15 @@ impl Checkpoint {
                 .ok_or_else(|| bad(format!("metadata `{k}` is missing")))
         };
         let format = get("format")?;
-        if format != CHECKPOINT_FORMAT {
-            return Err(bad(format!(
-                "format is {format:?}, expected {CHECKPOINT_FORMAT:?}"
-            )));
-        }
+        let legacy = match format.as_str() {
+            CHECKPOINT_FORMAT => false,
+            CHECKPOINT_FORMAT_1 => true,
+            _ => {
+                return Err(bad(format!(
+                    "format is {format:?}, expected {CHECKPOINT_FORMAT:?}"
+                )));
+            }
+        };
         fn parse<T: serde::de::DeserializeOwned>(
             text: &str,
             key: &str,
@@ -124,13 +207,82 @@ impl Checkpoint {
             serde_json::from_str(text)
                 .map_err(|e| BittError::corrupt(path, format!("metadata `{key}`: {e}")))
         }
+        if !legacy {
+            let stored = get("metadata_checksum")?;
+            let actual = metadata_checksum(&meta);
+            if stored != actual {
+                return Err(bad(format!(
+                    "the metadata was altered: its checksum is {actual}, the file says {stored}"
+                )));
+            }
+            let checksums: BTreeMap<String, String> = parse(&get("checksums")?, "checksums", path)?;
+            let tensors: usize = parse(&get("tensors")?, "tensors", path)?;
+            let names = st.names();
+            if names.len() != tensors || checksums.len() != tensors {
+                return Err(bad(format!(
+                    "the file holds {} tensors and {} checksums; its metadata says {tensors}",
+                    names.len(),
+                    checksums.len()
+                )));
+            }
+            for (name, sum) in &checksums {
+                let t = st
+                    .tensor(name)
+                    .map_err(|_| bad(format!("tensor {name} is missing")))?;
+                let actual = checksum(t.data());
+                if &actual != sum {
+                    return Err(bad(format!(
+                        "tensor {name} is corrupt: its checksum is {actual}, the file says {sum}"
+                    )));
+                }
+            }
+        }
         let iteration: usize = parse(&get("iteration")?, "iteration", path)?;
-        let lr_scale: f64 = parse(&get("lr_scale")?, "lr_scale", path)?;
-        let seconds: f64 = parse(&get("seconds")?, "seconds", path)?;
         let count: usize = parse(&get("parameters")?, "parameters", path)?;
         let adam_steps: Vec<u64> = parse(&get("adam_steps")?, "adam_steps", path)?;
-        let history: Vec<LossTerms> = parse(&get("history")?, "history", path)?;
         let events: Vec<(usize, String)> = parse(&get("events")?, "events", path)?;
+        let f64s = |name: &str, rank: usize| -> Result<Vec<f64>, BittError> {
+            let t = st
+                .tensor(name)
+                .map_err(|_| bad(format!("tensor {name} is missing")))?;
+            if t.dtype() != Dtype::F64 || t.shape().len() != rank {
+                return Err(bad(format!(
+                    "{name} is {:?} of shape {:?}",
+                    t.dtype(),
+                    t.shape()
+                )));
+            }
+            Ok(t.data()
+                .chunks_exact(8)
+                .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
+                .collect())
+        };
+        let (lr_scale, seconds, history) = if legacy {
+            let lr_scale: f64 = parse(&get("lr_scale")?, "lr_scale", path)?;
+            let seconds: f64 = parse(&get("seconds")?, "seconds", path)?;
+            let history: Vec<LossTerms> = parse(&get("history")?, "history", path)?;
+            (lr_scale, seconds, history)
+        } else {
+            let progress = f64s("progress", 1)?;
+            let [lr_scale, seconds] = progress[..] else {
+                return Err(bad(format!(
+                    "progress holds {} values, not 2",
+                    progress.len()
+                )));
+            };
+            let rows = f64s("history", 2)?;
+            let history: Vec<LossTerms> = rows
+                .chunks_exact(HISTORY_COLUMNS)
+                .map(|r| LossTerms::from_values(&r[..6], r[6]))
+                .collect();
+            if rows.len() != history.len() * HISTORY_COLUMNS {
+                return Err(bad(format!(
+                    "history holds {} values, not rows of {HISTORY_COLUMNS}",
+                    rows.len()
+                )));
+            }
+            (lr_scale, seconds, history)
+        };
         let read = |name: &str| -> Result<Option<HostTensor>, BittError> {
             let t = match st.tensor(name) {
                 Ok(t) => t,
@@ -149,24 +301,53 @@ impl Checkpoint {
             }
             Ok(Some((t.shape().to_vec(), values)))
         };
-        let mut parameters = Vec::with_capacity(count);
-        let (mut adam_m, mut adam_v) = (Vec::new(), Vec::new());
-        for i in 0..count {
-            parameters.push(
-                read(&format!("param.{i}"))?.ok_or_else(|| bad(format!("param.{i} is missing")))?,
-            );
-            adam_m.push(read(&format!("adam_m.{i}"))?.map(|t| t.1));
-            adam_v.push(read(&format!("adam_v.{i}"))?.map(|t| t.1));
-        }
-        if adam_steps.len() > count {
+        if !(adam_steps.is_empty() || adam_steps.len() == count) {
             return Err(bad(format!(
                 "{} Adam step counts for {count} parameters",
                 adam_steps.len()
             )));
         }
-        if !(lr_scale.is_finite() && lr_scale > 0.0) || history.len() != iteration {
+        let mut parameters = Vec::with_capacity(count);
+        let (mut adam_m, mut adam_v) = (Vec::new(), Vec::new());
+        for i in 0..count {
+            let p =
+                read(&format!("param.{i}"))?.ok_or_else(|| bad(format!("param.{i} is missing")))?;
+            let m = read(&format!("adam_m.{i}"))?.map(|t| t.1);
+            let v = read(&format!("adam_v.{i}"))?.map(|t| t.1);
+            let stepped = adam_steps.get(i).is_some_and(|&s| s > 0);
+            for (name, moment) in [("adam_m", &m), ("adam_v", &v)] {
+                match moment {
+                    Some(_) if !stepped => {
+                        return Err(bad(format!(
+                            "{name}.{i} is present, but parameter {i} has taken no Adam step"
+                        )));
+                    }
+                    Some(x) if x.len() != p.1.len() => {
+                        return Err(bad(format!(
+                            "{name}.{i} holds {} values; parameter {i} has {}",
+                            x.len(),
+                            p.1.len()
+                        )));
+                    }
+                    None if stepped => {
+                        return Err(bad(format!(
+                            "{name}.{i} is missing, but parameter {i} has taken Adam steps"
+                        )));
+                    }
+                    _ => {}
+                }
+            }
+            parameters.push(p);
+            adam_m.push(m);
+            adam_v.push(v);
+        }
+        if !(lr_scale.is_finite() && lr_scale > 0.0 && lr_scale <= 1.0)
+            || !(seconds.is_finite() && seconds >= 0.0)
+            || history.len() != iteration
+        {
             return Err(bad(format!(
-                "inconsistent progress: iteration {iteration}, {} losses, lr scale {lr_scale}",
+                "inconsistent progress: iteration {iteration}, {} losses, lr scale {lr_scale}, \
+                 {seconds} s",
                 history.len()
             )));
         }
@@ -188,28 +369,197 @@ impl Checkpoint {
 mod tests {
     use super::*;
 
-    #[test]
-    fn round_trip_and_corruption_is_named() {
-        let dir = std::env::temp_dir().join(format!("bitt-ckpt-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("checkpoint.safetensors");
+    fn example() -> Checkpoint {
         let terms = LossTerms::from_values(&[0.1, 0.2, 0.3, 0.4, 0.5, 0.6], 1.0);
-        let c = Checkpoint {
+        // A value whose shortest decimal text does not always parse back to the same bits.
+        let odd = LossTerms::from_values(
+            &[
+                0.1 + 0.2,
+                1.0 / 3.0,
+                2.2250738585072014e-308,
+                7e-9,
+                0.0,
+                5.0,
+            ],
+            9.000000000000002,
+        );
+        Checkpoint {
             iteration: 2,
             lr_scale: 0.5,
-            history: vec![terms, terms],
+            history: vec![terms, odd],
             events: vec![(1, "loss was NaN".into())],
             parameters: vec![(vec![2, 2], vec![1.0, 2.0, 3.0, 4.0]), (vec![1], vec![5.0])],
             adam_steps: vec![2, 0],
             adam_m: vec![Some(vec![0.1; 4]), None],
             adam_v: vec![Some(vec![0.2; 4]), None],
             seconds: 3.5,
-        };
+        }
+    }
+
+    fn scratch(name: &str) -> std::path::PathBuf {
+        let dir = std::env::temp_dir().join(format!("bitt-ckpt-{name}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        dir.join("checkpoint.safetensors")
+    }
+
+    #[test]
+    fn round_trip_is_bit_exact_and_garbage_is_named() {
+        let path = scratch("round");
+        let c = example();
         c.save(&path).unwrap();
-        assert_eq!(Checkpoint::load(&path).unwrap(), c);
+        let back = Checkpoint::load(&path).unwrap();
+        assert_eq!(back, c);
+        for (a, b) in back.history.iter().zip(&c.history) {
+            assert_eq!(a.row().map(f64::to_bits), b.row().map(f64::to_bits));
+        }
         std::fs::write(&path, b"not a checkpoint").unwrap();
         let e = Checkpoint::load(&path).unwrap_err().to_string();
         assert!(e.contains("checkpoint.safetensors"), "{e}");
-        std::fs::remove_dir_all(&dir).ok();
+        std::fs::remove_dir_all(path.parent().unwrap()).ok();
+    }
+
+    /// Every byte of every tensor is covered: a flipped byte anywhere in the data is named.
+    #[test]
+    fn a_flipped_byte_in_any_tensor_is_named() {
+        let path = scratch("flip");
+        example().save(&path).unwrap();
+        let good = std::fs::read(&path).unwrap();
+        let header = u64::from_le_bytes(good[..8].try_into().unwrap()) as usize + 8;
+        // Any byte of the header flipped, or the file cut anywhere: an error, never a panic,
+        // and never a checkpoint that differs from the one written.
+        for at in 0..header {
+            let mut bad = good.clone();
+            bad[at] ^= 0x01;
+            if let Ok(c) = Checkpoint::from_bytes(&bad, &path) {
+                assert_eq!(c, example(), "header byte {at} changed the checkpoint");
+            }
+        }
+        for len in 0..good.len() {
+            assert!(
+                Checkpoint::from_bytes(&good[..len], &path).is_err(),
+                "cut at {len}"
+            );
+        }
+        for at in header..good.len() {
+            let mut bad = good.clone();
+            bad[at] ^= 0x10;
+            let e = Checkpoint::from_bytes(&bad, &path).unwrap_err().to_string();
+            assert!(
+                e.contains("checkpoint.safetensors") && e.contains("corrupt"),
+                "byte {at}: {e}"
+            );
+        }
+        std::fs::remove_dir_all(path.parent().unwrap()).ok();
+    }
+
+    /// Altered metadata (an Adam step count, the iteration) and inconsistent counts are named.
+    #[test]
+    fn altered_metadata_and_wrong_counts_are_named() {
+        let path = scratch("meta");
+        let c = example();
+        c.save(&path).unwrap();
+        let good = std::fs::read(&path).unwrap();
+        let find = |hay: &[u8], needle: &[u8]| hay.windows(needle.len()).position(|w| w == needle);
+        let at = find(&good, br#""adam_steps":"[2,0]""#).expect("header layout changed");
+        let mut altered = good.clone();
+        altered[at + 15] = b'3';
+        let e = Checkpoint::from_bytes(&altered, &path)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("metadata was altered"), "{e}");
+        // Counts are checked even when the checksums agree (a file written by a buggy writer).
+        for (field, broken, expect) in [
+            (
+                "adam_steps",
+                Checkpoint {
+                    adam_steps: vec![2],
+                    ..c.clone()
+                },
+                "Adam step counts",
+            ),
+            (
+                "history",
+                Checkpoint {
+                    iteration: 3,
+                    ..c.clone()
+                },
+                "inconsistent progress",
+            ),
+            (
+                "adam_m",
+                Checkpoint {
+                    adam_m: vec![Some(vec![0.1; 3]), None],
+                    ..c.clone()
+                },
+                "adam_m.0 holds 3 values",
+            ),
+            (
+                "adam_v",
+                Checkpoint {
+                    adam_v: vec![Some(vec![0.2; 4]), Some(vec![0.0])],
+                    ..c.clone()
+                },
+                "adam_v.1 is present",
+            ),
+            (
+                "lr_scale",
+                Checkpoint {
+                    lr_scale: 8.0,
+                    ..c.clone()
+                },
+                "lr scale 8",
+            ),
+        ] {
+            broken.save(&path).unwrap();
+            let e = Checkpoint::load(&path).unwrap_err().to_string();
+            assert!(
+                e.contains(expect) && e.contains("checkpoint.safetensors"),
+                "{field}: {e}"
+            );
+        }
+        std::fs::remove_dir_all(path.parent().unwrap()).ok();
+    }
+
+    /// Checkpoints of the first format (no checksums, progress as JSON text) still resume.
+    #[test]
+    fn first_format_files_still_load() {
+        let path = scratch("v1");
+        let c = Checkpoint {
+            history: vec![LossTerms::from_values(&[0.5; 6], 3.0); 2],
+            ..example()
+        };
+        let bytes = |v: &[f32]| f32_bytes(v);
+        let tensors = [
+            ("param.0", vec![2, 2], bytes(&c.parameters[0].1)),
+            ("param.1", vec![1], bytes(&c.parameters[1].1)),
+            ("adam_m.0", vec![4], bytes(&[0.1; 4])),
+            ("adam_v.0", vec![4], bytes(&[0.2; 4])),
+        ];
+        let views: Vec<_> = tensors
+            .iter()
+            .map(|(n, s, b)| {
+                let v = safetensors::tensor::TensorView::new(Dtype::F32, s.clone(), b).unwrap();
+                (n.to_string(), v)
+            })
+            .collect();
+        let meta = HashMap::from([
+            ("format".to_string(), CHECKPOINT_FORMAT_1.to_string()),
+            ("iteration".to_string(), "2".to_string()),
+            ("lr_scale".to_string(), "0.5".to_string()),
+            ("seconds".to_string(), "3.5".to_string()),
+            ("parameters".to_string(), "2".to_string()),
+            ("adam_steps".to_string(), "[2,0]".to_string()),
+            (
+                "history".to_string(),
+                serde_json::to_string(&c.history).unwrap(),
+            ),
+            (
+                "events".to_string(),
+                serde_json::to_string(&c.events).unwrap(),
+            ),
+        ]);
+        std::fs::write(&path, safetensors::serialize(views, Some(meta)).unwrap()).unwrap();
+        assert_eq!(Checkpoint::load(&path).unwrap(), c);
+        std::fs::remove_dir_all(path.parent().unwrap()).ok();
     }
 }

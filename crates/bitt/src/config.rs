@@ -6,6 +6,65 @@ use bitt_texture::ProceduralTextureConfig;
 
 use crate::BittError;
 
+/// The largest learning rate a configuration may ask for (Adam steps of this size already
+/// destroy the networks; the paper's is 1e-3).
+pub const MAX_LEARNING_RATE: f64 = 1.0;
+
+/// The largest loss weight a configuration may give a term (the paper's are at most 1).
+pub const MAX_LOSS_WEIGHT: f64 = 1e3;
+
+/// Reads a configuration file's `text` as `T`, refusing fields `T` does not have (a typo
+/// would otherwise be silently ignored) and naming `path` and the field (`optim.learnig_rate`).
+/// Works for any nesting and any derive (the read value is written back and its keys
+/// compared), so every configuration file of the project goes through it.
+pub fn read_config<T>(text: &str, path: &std::path::Path, what: &str) -> Result<T, BittError>
+where
+    T: serde::Serialize + serde::de::DeserializeOwned,
+{
+    let raw: serde_json::Value = serde_json::from_str(text)
+        .map_err(|e| BittError::corrupt(path, format!("not {what}: {e}")))?;
+    let value: T = serde_json::from_value(raw.clone())
+        .map_err(|e| BittError::corrupt(path, format!("not {what}: {e}")))?;
+    let known = serde_json::to_value(&value)
+        .map_err(|e| BittError::corrupt(path, format!("not {what}: {e}")))?;
+    let mut unknown = Vec::new();
+    unknown_fields(&raw, &known, "", &mut unknown);
+    if !unknown.is_empty() {
+        return Err(BittError::corrupt(
+            path,
+            format!(
+                "unknown field{} {} in {what} (misspelt? the fields are those of a run's \
+                 config.json)",
+                if unknown.len() == 1 { "" } else { "s" },
+                unknown.join(", ")
+            ),
+        ));
+    }
+    Ok(value)
+}
+
+/// Keys of `raw` (dotted paths below `prefix`) that `known` does not have.
+fn unknown_fields(
+    raw: &serde_json::Value,
+    known: &serde_json::Value,
+    prefix: &str,
+    out: &mut Vec<String>,
+) {
+    if let (Some(raw), Some(known)) = (raw.as_object(), known.as_object()) {
+        for (k, v) in raw {
+            let path = if prefix.is_empty() {
+                format!("`{k}`")
+            } else {
+                format!("`{}.{k}`", prefix.trim_matches('`'))
+            };
+            match known.get(k) {
+                Some(kv) => unknown_fields(v, kv, &path, out),
+                None => out.push(path),
+            }
+        }
+    }
+}
+
 /// The loss weights of paper Sec. 3.4 (eq. 6-10). Every term is a mean absolute difference
 /// (the reference's `L1Loss`, mean reduction).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -187,32 +246,65 @@ impl TrainConfig {
             return bad("checkpoint_every must be at least 1".into());
         }
         let o = &self.optim;
-        let finite_pos = |x: f64| x.is_finite() && x > 0.0;
-        let ok = finite_pos(o.learning_rate)
-            && finite_pos(o.epsilon)
-            && finite_pos(o.decay_gamma)
-            && (0.0..1.0).contains(&o.beta1)
-            && (0.0..1.0).contains(&o.beta2)
-            && o.min_learning_rate.is_finite()
-            && o.min_learning_rate >= 0.0;
-        if !ok {
-            return bad(format!("optimiser settings out of range: {o:?}"));
-        }
+        let check = |field: &str, value: f64, ok: bool, range: &str| {
+            if ok {
+                Ok(())
+            } else {
+                bad(format!(
+                    "optim.{field} = {value} is out of range: it must be {range}"
+                ))
+            }
+        };
+        check(
+            "learning_rate",
+            o.learning_rate,
+            o.learning_rate > 0.0 && o.learning_rate <= MAX_LEARNING_RATE,
+            &format!("in (0, {MAX_LEARNING_RATE}] (the paper's is 1e-3)"),
+        )?;
+        check("beta1", o.beta1, (0.0..1.0).contains(&o.beta1), "in [0, 1)")?;
+        check("beta2", o.beta2, (0.0..1.0).contains(&o.beta2), "in [0, 1)")?;
+        check(
+            "epsilon",
+            o.epsilon,
+            o.epsilon > 0.0 && o.epsilon <= 1.0,
+            "in (0, 1]",
+        )?;
+        check(
+            "decay_gamma",
+            o.decay_gamma,
+            o.decay_gamma > 0.0 && o.decay_gamma <= 1.0,
+            "in (0, 1]",
+        )?;
+        check(
+            "min_learning_rate",
+            o.min_learning_rate,
+            o.min_learning_rate >= 0.0 && o.min_learning_rate <= o.learning_rate,
+            "in [0, learning_rate]",
+        )?;
         let w = &self.loss;
-        if [w.rec, w.rec_coarse, w.rec_albedo, w.nv, w.alb, w.sym]
-            .iter()
-            .any(|x| !x.is_finite() || *x < 0.0)
-        {
-            return bad(format!("loss weights must be finite and >= 0: {w:?}"));
+        for (field, value) in [
+            ("rec", w.rec),
+            ("rec_coarse", w.rec_coarse),
+            ("rec_albedo", w.rec_albedo),
+            ("nv", w.nv),
+            ("alb", w.alb),
+            ("sym", w.sym),
+        ] {
+            if !(value.is_finite() && (0.0..=MAX_LOSS_WEIGHT).contains(&value)) {
+                return bad(format!(
+                    "loss.{field} = {value} is out of range: it must be in [0, {MAX_LOSS_WEIGHT}]"
+                ));
+            }
         }
         Ok(())
     }
 
-    /// Reads a `config.json`.
+    /// Reads a `config.json`: unknown fields and out-of-range values are refused, naming
+    /// the file and the field.
     pub fn from_json(text: &str, path: &std::path::Path) -> Result<Self, BittError> {
-        let c: TrainConfig = serde_json::from_str(text)
-            .map_err(|e| BittError::corrupt(path, format!("not a training config: {e}")))?;
-        c.validate()?;
+        let c: TrainConfig = read_config(text, path, "a training config")?;
+        c.validate()
+            .map_err(|e| BittError::corrupt(path, e.to_string()))?;
         Ok(c)
     }
 }

@@ -558,6 +558,86 @@ pub fn reference_crop_box(b: [f64; 4]) -> [f64; 4] {
     [cx - half, cy - half, cx + half, cy + half]
 }
 
+/// The smallest fraction of each hand's projected vertices that must fall inside the
+/// training image: less, and the photo shows too little of that hand to texture it (or the
+/// annotation belongs to another image).
+pub const MIN_HAND_INSIDE: f64 = 0.5;
+
+/// The depths (metres along the camera's axis) every vertex of a photographed hand lies
+/// between: nearer than 5 cm, or farther than 20 m, is a wrong translation, not a photo.
+pub const HAND_DEPTH_RANGE_M: [f64; 2] = [0.05, 20.0];
+
+/// Checks each hand of the training view on its own: its position finite, every vertex in
+/// front of the camera within [`HAND_DEPTH_RANGE_M`], and at least [`MIN_HAND_INSIDE`] of its
+/// projected vertices inside the image. Errors name `source` (the annotation), the hand and
+/// the problem.
+pub fn check_hand_placement(
+    hands: &TwoHandScene,
+    models: &HandPair,
+    source: &Path,
+) -> Result<(), BittError> {
+    let bad = |m: String| Err(BittError::Invalid(format!("{}: {m}", source.display())));
+    let posed = hands
+        .pose_in_camera(models)
+        .map_err(|e| BittError::Invalid(format!("{}: {e}", source.display())))?;
+    let (w, h) = (
+        f64::from(hands.camera.width),
+        f64::from(hands.camera.height),
+    );
+    let [near, far] = HAND_DEPTH_RANGE_M;
+    for side in Side::BOTH {
+        let Some(hand) = posed.get(side) else {
+            continue;
+        };
+        let vertices = &hand.vertices;
+        if vertices.is_empty() {
+            continue;
+        }
+        if vertices.iter().any(|v| !v.is_finite()) {
+            return bad(format!(
+                "the {side} hand's position is not finite (its translation is out of range)"
+            ));
+        }
+        let (zmin, zmax) = vertices
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(v.z), b.max(v.z))
+            });
+        if zmax <= 0.0 {
+            return bad(format!(
+                "the {side} hand is behind the camera (depth {zmin:.3} to {zmax:.3} m)"
+            ));
+        }
+        if zmin <= 0.0 {
+            return bad(format!(
+                "the {side} hand is partly behind the camera (depth {zmin:.3} to {zmax:.3} m)"
+            ));
+        }
+        if zmin < near || zmax > far {
+            return bad(format!(
+                "the {side} hand lies {zmin:.3} to {zmax:.3} m from the camera; a photographed \
+                 hand lies between {near} and {far} m"
+            ));
+        }
+        let inside = vertices
+            .iter()
+            .filter_map(|v| hands.camera.camera_to_pixel(*v))
+            .filter(|p| p.x >= -0.5 && p.x <= w - 0.5 && p.y >= -0.5 && p.y <= h - 0.5)
+            .count();
+        let fraction = inside as f64 / vertices.len() as f64;
+        if fraction < MIN_HAND_INSIDE {
+            return bad(format!(
+                "only {:.0}% of the {side} hand projects into the {w}x{h} image (at least {:.0}% \
+                 must): the hand is off the image, or the image and its annotation do not belong \
+                 together",
+                100.0 * fraction,
+                100.0 * MIN_HAND_INSIDE
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// The pixel box of both hands ([`hands_box`]), refused when it lies outside the image (the
 /// image at `source` and its annotation do not belong together).
 pub fn hands_in_image(
@@ -667,6 +747,7 @@ pub fn annotation_view(
         annotation.display()
     );
     let pixels = read_image(image, &hands.camera, &what)?;
+    check_hand_placement(&hands, models, annotation)?;
     prepare_view("train", image, pixels, &hands, models, size)
 }
 
@@ -684,6 +765,7 @@ pub fn interhand_views(
         let pixels = read_image(&v.image_path, &v.scene.camera, &what)?;
         prepare_view(&name, &v.image_path, pixels, &v.scene, models, size)
     };
+    check_hand_placement(&scene.train.scene, models, &scene.train.image_path)?;
     Ok(RealScene {
         train: prep("train".into(), &scene.train)?,
         novel_views: scene
@@ -877,6 +959,7 @@ pub fn keypoint_setup(
         }
     }
     let models = fit.models.clone();
+    check_hand_placement(&fit.hands, &models, keypoints)?;
     let view = prepare_view(
         "train",
         image,
@@ -1635,6 +1718,72 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.contains("far.png") && e.contains("outside"), "{e}");
+    }
+
+    /// Each hand is checked on its own: one hand off the image, far away, behind the camera
+    /// or at a non-finite place is refused, naming the file, the hand and the problem, even
+    /// when the other hand is fine.
+    #[test]
+    fn each_hand_must_be_in_front_of_the_camera_and_in_the_image() {
+        let models = procedural_pair();
+        let mut hands = TwoHandScene {
+            left: Some(bitt_mesh::HandParams::mean_pose()),
+            right: Some(bitt_mesh::HandParams::mean_pose()),
+            camera: PinholeCamera::looking_down_z(300.0, 200, 120),
+            frame: Default::default(),
+        };
+        for (side, x) in [(Side::Left, -0.07), (Side::Right, 0.07)] {
+            let p = match side {
+                Side::Left => hands.left.as_mut().unwrap(),
+                Side::Right => hands.right.as_mut().unwrap(),
+            };
+            p.trans = DVec3::new(x - 0.09, -0.01, 0.7);
+            p.root_rotation = DMat3::IDENTITY;
+        }
+        let source = Path::new("frame.pkl");
+        check_hand_placement(&hands, &models, source).unwrap();
+        let moved = |offset: DVec3| {
+            let mut h = hands.clone();
+            let left = h.left.as_mut().unwrap();
+            left.trans += offset;
+            check_hand_placement(&h, &models, source)
+                .unwrap_err()
+                .to_string()
+        };
+        for (offset, expect) in [
+            (DVec3::new(100.0, 0.0, 0.0), "only 0% of the left hand"),
+            (DVec3::new(1e20, 0.0, 0.0), "only 0% of the left hand"),
+            (DVec3::new(3e38, 0.0, 0.0), "only 0% of the left hand"),
+            (DVec3::new(0.0, 0.0, -5.0), "left hand is behind the camera"),
+            (DVec3::new(0.0, 0.0, -0.7), "left hand is partly behind"),
+            (
+                DVec3::new(0.0, 0.0, 100.0),
+                "a photographed hand lies between",
+            ),
+            (
+                DVec3::new(0.0, 0.0, 1e20),
+                "a photographed hand lies between",
+            ),
+            (
+                DVec3::new(f64::INFINITY, 0.0, 0.0),
+                "left hand: a pose, shape, rotation or translation value is NaN or infinite",
+            ),
+            // Shifted right by most of the image: the box of both hands still overlaps it.
+            (
+                DVec3::new(0.55, 0.0, 0.0),
+                "of the left hand projects into the 200x120",
+            ),
+        ] {
+            let e = moved(offset);
+            assert!(
+                e.contains("frame.pkl") && e.contains(expect),
+                "{offset}: {e}"
+            );
+        }
+        // The check on the box of both hands alone let the last one through.
+        let mut h = hands.clone();
+        h.left.as_mut().unwrap().trans += DVec3::new(0.55, 0.0, 0.0);
+        hands_in_image(&h, &models, source).unwrap();
     }
 
     #[test]

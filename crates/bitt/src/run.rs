@@ -34,8 +34,13 @@ pub mod files {
     pub const CONFIG: &str = "config.json";
     /// The latest checkpoint.
     pub const CHECKPOINT: &str = "checkpoint.safetensors";
-    /// Metrics and loss history.
+    /// The checkpoint before it (see [`crate::trainer::previous_checkpoint_path`]).
+    pub const CHECKPOINT_PREVIOUS: &str = "checkpoint.previous.safetensors";
+    /// Metrics and loss history: the same bytes for a resumed run as for an uninterrupted
+    /// one (no timings; those are in [`TIMING`]).
     pub const METRICS: &str = "metrics.json";
+    /// How long training took (seconds, iterations).
+    pub const TIMING: &str = "timing.json";
     /// The estimated light.
     pub const LIGHT: &str = "light.json";
     /// The report.
@@ -228,7 +233,8 @@ fn mean_score(scores: &[ViewScore]) -> Option<MeanScore> {
 pub struct RunSummary {
     /// Iterations trained.
     pub iterations: usize,
-    /// Training seconds.
+    /// Training seconds (in `timing.json`, not `metrics.json`: they differ between runs).
+    #[serde(skip)]
     pub seconds: f64,
     /// Final loss terms.
     pub final_loss: Option<crate::LossTerms>,
@@ -469,6 +475,13 @@ pub fn write_run(
         "refine": refinement,
     });
     write_json(&dir.join(files::METRICS), &metrics)?;
+    write_json(
+        &dir.join(files::TIMING),
+        &serde_json::json!({
+            "training_seconds": summary.seconds,
+            "iterations": summary.iterations,
+        }),
+    )?;
     write_report(
         &dir.join(files::REPORT),
         trainer,

@@ -99,6 +99,158 @@ fn resuming_from_a_checkpoint_is_exact() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// The issue-18 failure: the latest checkpoint holds weights whose own forward pass is not
+/// finite (finite but absurd values, which the file's checks accept). Going back to that
+/// checkpoint would fail identically forever; the trainer drops it, goes back to the one
+/// before it (kept on disk as `checkpoint.previous.safetensors`), really lowers the learning
+/// rate, saves the state it went back to, and finishes.
+#[test]
+fn a_checkpoint_whose_forward_pass_fails_is_skipped() {
+    let (mut config, scene, pca) = tiny();
+    config.iterations = 2;
+    config.checkpoint_every = 1;
+    let device = Device::flex().autodiff();
+    let dir = scratch("bad-latest");
+    let path = dir.join("checkpoint.safetensors");
+    let previous_path = crate::trainer::previous_checkpoint_path(&path);
+    let mut t = synthetic_trainer(&scene, &config, &pca, &device).unwrap();
+    t.train(Some(&path), &mut Silent).unwrap();
+    let previous = Checkpoint::load(&previous_path).unwrap();
+    assert_eq!(previous.iteration, 1);
+    // Every weight of the latest checkpoint blown up to a finite 1e30.
+    let mut latest = Checkpoint::load(&path).unwrap();
+    assert_eq!(latest.iteration, 2);
+    for (_, v) in &mut latest.parameters {
+        v.iter_mut().for_each(|x| *x = 1e30 * x.signum());
+    }
+    latest.save(&path).unwrap();
+    let latest = Checkpoint::load(&path).unwrap();
+
+    config.iterations = 4;
+    let mut resumed = synthetic_trainer(&scene, &config, &pca, &device).unwrap();
+    resumed.resume_from(&latest, Some(previous)).unwrap();
+    let lr_before = resumed.learning_rate();
+    assert!(matches!(resumed.step(), Err(BittError::NonFinite(_))));
+    resumed.train(Some(&path), &mut Silent).unwrap();
+    assert_eq!(resumed.iteration, 4);
+    assert_eq!(resumed.events.len(), 1, "{:?}", resumed.events);
+    assert_eq!(resumed.events[0].0, 2, "{:?}", resumed.events);
+    assert!(
+        resumed.events[0].1.contains("went back to iteration 1"),
+        "{:?}",
+        resumed.events
+    );
+    assert_eq!(resumed.lr_scale, 0.5);
+    assert!(resumed.learning_rate() <= 0.5 * lr_before);
+    assert!(resumed.history.iter().all(|h| h.is_finite()));
+    // The file on disk is the finished, good state.
+    let done = Checkpoint::load(&path).unwrap();
+    assert_eq!((done.iteration, done.events.len()), (4, 1));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Every recovery lowers the learning rate further (it used to be reset to the checkpoint's
+/// and halved again, printing the same rate every time); after the last allowed recovery
+/// the trainer holds and saves the last good state, whose results can still be written.
+#[test]
+fn exhausted_recovery_keeps_the_last_good_state_and_its_results() {
+    let (mut config, scene, pca) = tiny();
+    config.iterations = 2;
+    config.checkpoint_every = 1;
+    let device = Device::flex().autodiff();
+    let dir = scratch("exhausted");
+    let path = dir.join("checkpoint.safetensors");
+    let mut t = synthetic_trainer(&scene, &config, &pca, &device).unwrap();
+    t.train(Some(&path), &mut Silent).unwrap();
+    let good = parameters_host(&t.nets);
+    // A learning rate no validation accepts (set behind its back): every step from here
+    // blows the weights up, and every recovery's halving is not enough.
+    t.config.optim.learning_rate = 1e38;
+    t.config.optim.min_learning_rate = 1e38;
+    t.config.iterations = 6;
+    struct Rates(Vec<f64>, usize);
+    impl crate::Observer for Rates {
+        fn iteration(&mut self, p: &crate::Progress) {
+            self.0.push(p.learning_rate);
+        }
+        fn recovered(&mut self, _: usize, _: &str) {
+            self.1 += 1;
+        }
+    }
+    let mut rates = Rates(Vec::new(), 0);
+    let e = t.train(Some(&path), &mut rates).unwrap_err();
+    assert!(
+        matches!(e, BittError::RecoveryExhausted { restored: 2, count, .. } if count == crate::trainer::MAX_NON_FINITE),
+        "{e}"
+    );
+    assert_eq!(rates.1, crate::trainer::MAX_NON_FINITE + 1);
+    assert_eq!(t.events.len(), crate::trainer::MAX_NON_FINITE + 1);
+    // The rate really fell with every recovery.
+    let (first, last) = (rates.0[0], *rates.0.last().unwrap());
+    assert!(
+        rates.0.windows(2).all(|w| w[1] <= w[0]) && last <= first / 128.0,
+        "learning rates {:?}",
+        rates.0
+    );
+    assert_eq!(
+        t.lr_scale,
+        0.5f64.powi(crate::trainer::MAX_NON_FINITE as i32)
+    );
+    // The trainer and the file hold the last good state.
+    assert_eq!(t.iteration, 2);
+    assert_eq!(parameters_host(&t.nets), good);
+    let saved = Checkpoint::load(&path).unwrap();
+    assert_eq!(saved.iteration, 2);
+    assert_eq!(saved.parameters, good);
+    let summary = write_run(&dir, &t, Some(&scene), 0).unwrap();
+    assert!(summary.input_psnr.is_finite());
+    assert!(dir.join("metrics.json").is_file() && dir.join("avatar.glb").is_file());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Out-of-range settings are refused, naming the field (and the file when read from one);
+/// unknown fields are refused with their dotted path.
+#[test]
+fn config_ranges_and_unknown_fields_are_named() {
+    let mut c = TrainConfig::preset(Preset::Tiny);
+    c.optim.learning_rate = 1e4;
+    let e = c.validate().unwrap_err().to_string();
+    assert!(e.contains("optim.learning_rate = 10000"), "{e}");
+    let text = serde_json::to_string(&c).unwrap();
+    let path = std::path::Path::new("my-config.json");
+    let e = TrainConfig::from_json(&text, path).unwrap_err().to_string();
+    assert!(
+        e.contains("my-config.json") && e.contains("optim.learning_rate"),
+        "{e}"
+    );
+    let mut c = TrainConfig::preset(Preset::Tiny);
+    c.loss.sym = -1.0;
+    let e = TrainConfig::from_json(&serde_json::to_string(&c).unwrap(), path)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("my-config.json") && e.contains("loss.sym = -1"),
+        "{e}"
+    );
+    let mut v = serde_json::to_value(TrainConfig::preset(Preset::Tiny)).unwrap();
+    v["optim"]["learnig_rate"] = serde_json::json!(0.01);
+    v["colour"] = serde_json::json!("red");
+    let e = TrainConfig::from_json(&v.to_string(), path)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("my-config.json")
+            && e.contains("`optim.learnig_rate`")
+            && e.contains("`colour`"),
+        "{e}"
+    );
+    v["nets"]["btr"]["widht"] = serde_json::json!(3);
+    let e = TrainConfig::from_json(&v.to_string(), path)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("`nets.btr.widht`"), "{e}");
+}
+
 /// A non-finite loss restores the last good state, halves the learning rate, is recorded,
 /// and training finishes; nothing non-finite is written.
 #[test]

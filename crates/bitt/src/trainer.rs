@@ -20,6 +20,53 @@ use crate::pipeline::{Outputs, TrainingView, forward};
 /// Non-finite losses tolerated in one run before giving up.
 pub const MAX_NON_FINITE: usize = 8;
 
+/// The factor on the learning rate at every recovery from a non-finite loss.
+pub const RECOVERY_LR_FACTOR: f64 = 0.5;
+
+/// A state the trainer can go back to. A checkpoint is written right after a step, from
+/// weights no forward pass has tried yet; it is `verified` once a step from it gave a finite
+/// loss. An unverified state whose own forward pass is not finite is dropped, and the trainer
+/// goes back to the one before it (always verified).
+#[derive(Debug, Clone)]
+struct Snapshot {
+    checkpoint: Checkpoint,
+    verified: bool,
+}
+
+/// The file next to `checkpoint` that keeps the checkpoint before it
+/// (`checkpoint.safetensors` -> `checkpoint.previous.safetensors`).
+pub fn previous_checkpoint_path(checkpoint: &Path) -> std::path::PathBuf {
+    let stem = checkpoint
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "checkpoint".into());
+    let ext = checkpoint
+        .extension()
+        .map(|s| format!(".{}", s.to_string_lossy()))
+        .unwrap_or_default();
+    checkpoint.with_file_name(format!("{stem}.previous{ext}"))
+}
+
+/// Keeps the current checkpoint file as the previous one before a new one replaces it: a
+/// hard link moved into place atomically (a copy where links are not supported).
+fn keep_as_previous(path: &Path) -> Result<(), BittError> {
+    if !path.is_file() {
+        return Ok(());
+    }
+    let previous = previous_checkpoint_path(path);
+    // The temporaries' pattern of `write_atomically`, which a resume removes when stale.
+    let name = previous
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = previous.with_file_name(format!(".{name}.tmp{}", std::process::id()));
+    let _ = std::fs::remove_file(&tmp);
+    if std::fs::hard_link(path, &tmp).is_err() {
+        std::fs::copy(path, &tmp).map_err(|e| BittError::io(&tmp, e))?;
+    }
+    std::fs::rename(&tmp, &previous).map_err(|e| BittError::io(&previous, e))
+}
+
 /// What the trainer reports after each iteration.
 #[derive(Debug, Clone, Copy)]
 pub struct Progress {
@@ -87,8 +134,9 @@ pub struct Trainer {
     pub events: Vec<(usize, String)>,
     /// Seconds trained before this session (resumed runs).
     pub seconds_before: f64,
-    /// Last good state, restored after a non-finite loss.
-    snapshot: Option<Checkpoint>,
+    /// The last two states to go back to after a non-finite loss, oldest first (see
+    /// [`Snapshot`]).
+    snapshots: Vec<Snapshot>,
     device: Device,
 }
 
@@ -134,6 +182,14 @@ impl Trainer {
         let nets = load_parameters(config.nets.init(device)?, &initial, device)
             .map_err(BittError::Invalid)?;
         let view = TrainingView::new(&assets, geometry, image, mask, device)?;
+        for (side, visible) in ["left", "right"].into_iter().zip(view.visible_fraction()) {
+            if visible <= 0.0 {
+                return Err(BittError::Invalid(format!(
+                    "the {side} hand shows no texel in the training view (it is hidden, behind \
+                     the camera or off the image); BiTT needs both hands in view"
+                )));
+            }
+        }
         let gather = assets.gather(device);
         Ok(Trainer {
             adam: Adam::new(config.optim.clone()),
@@ -149,7 +205,7 @@ impl Trainer {
             history: Vec::new(),
             events: Vec::new(),
             seconds_before: 0.0,
-            snapshot: None,
+            snapshots: Vec::new(),
             device: device.clone(),
         })
     }
@@ -215,7 +271,7 @@ impl Trainer {
             t.as_ref().map(|t| read(t.clone())).transpose()
         };
         let s = &self.adam.state;
-        Ok(Checkpoint {
+        let c = Checkpoint {
             iteration: self.iteration,
             lr_scale: self.lr_scale,
             history: self.history.clone(),
@@ -225,7 +281,44 @@ impl Trainer {
             adam_m: s.m.iter().map(host).collect::<Result<_, _>>()?,
             adam_v: s.v.iter().map(host).collect::<Result<_, _>>()?,
             seconds,
-        })
+        };
+        let finite = |v: &[f32]| v.iter().all(|x| x.is_finite());
+        if !(c.parameters.iter().all(|(_, v)| finite(v))
+            && c.adam_m
+                .iter()
+                .chain(&c.adam_v)
+                .flatten()
+                .all(|v| finite(v)))
+        {
+            return Err(BittError::NonFinite(format!(
+                "the weights or Adam moments after iteration {}",
+                self.iteration
+            )));
+        }
+        Ok(c)
+    }
+
+    /// Restores `latest` (a run's checkpoint file) and keeps `previous` (the one before it,
+    /// when there is one) to go back to should `latest`'s weights give a non-finite loss.
+    pub fn resume_from(
+        &mut self,
+        latest: &Checkpoint,
+        previous: Option<Checkpoint>,
+    ) -> Result<(), BittError> {
+        self.restore(latest)?;
+        self.snapshots = previous
+            .filter(|p| p.iteration < latest.iteration)
+            .map(|checkpoint| Snapshot {
+                checkpoint,
+                verified: true,
+            })
+            .into_iter()
+            .chain([Snapshot {
+                checkpoint: latest.clone(),
+                verified: false,
+            }])
+            .collect();
+        Ok(())
     }
 
     /// Restores a checkpoint (from [`Trainer::checkpoint`] or a file) into this trainer.
@@ -252,8 +345,14 @@ impl Trainer {
 
     /// Trains until `config.iterations`, writing `checkpoint_path` every
     /// `config.checkpoint_every` iterations, at the end, and when the observer asks to stop
-    /// (then returns [`BittError::Interrupted`]). A non-finite loss restores the last good
-    /// state, halves the learning rate and continues (at most [`MAX_NON_FINITE`] times).
+    /// (then returns [`BittError::Interrupted`]); the checkpoint it replaces is kept as
+    /// [`previous_checkpoint_path`].
+    ///
+    /// A non-finite loss (or non-finite weights) goes back to the last good state, lowers
+    /// the learning rate by [`RECOVERY_LR_FACTOR`] (cumulatively) and continues; the state
+    /// gone back to is saved at once, so `--resume` never repeats the failure. After
+    /// [`MAX_NON_FINITE`] recoveries it returns [`BittError::RecoveryExhausted`], holding
+    /// (and having saved) the last good state, whose results can still be written.
     pub fn train(
         &mut self,
         checkpoint_path: Option<&Path>,
@@ -261,13 +360,21 @@ impl Trainer {
     ) -> Result<(), BittError> {
         let start = Instant::now();
         let seconds = |t: &Trainer| t.seconds_before + start.elapsed().as_secs_f64();
-        if self.snapshot.is_none() {
-            self.snapshot = Some(self.checkpoint(seconds(self))?);
+        if self.snapshots.is_empty() {
+            let checkpoint = self.checkpoint(seconds(self))?;
+            self.snapshots.push(Snapshot {
+                checkpoint,
+                verified: false,
+            });
         }
         while self.iteration < self.config.iterations {
             let lr = self.learning_rate();
-            match self.step() {
+            let failure = match self.step() {
                 Ok((terms, psnr)) => {
+                    // A step from the latest state gave a finite loss: that state is good.
+                    if let Some(latest) = self.snapshots.last_mut() {
+                        latest.verified = true;
+                    }
                     observer.iteration(&Progress {
                         iteration: self.iteration,
                         iterations: self.config.iterations,
@@ -276,49 +383,123 @@ impl Trainer {
                         learning_rate: lr,
                         seconds: seconds(self),
                     });
-                }
-                Err(BittError::NonFinite(message)) => {
-                    if self.events.len() >= MAX_NON_FINITE {
-                        return Err(BittError::NonFinite(format!(
-                            "{message}; gave up after {MAX_NON_FINITE} recoveries"
-                        )));
+                    let done = self.iteration == self.config.iterations;
+                    let stop = observer.should_stop();
+                    if done || stop || self.iteration.is_multiple_of(self.config.checkpoint_every) {
+                        match self.checkpoint(seconds(self)) {
+                            Ok(c) => {
+                                if let Some(path) = checkpoint_path {
+                                    keep_as_previous(path)?;
+                                    c.save(path)?;
+                                }
+                                self.snapshots.push(Snapshot {
+                                    checkpoint: c,
+                                    verified: false,
+                                });
+                                if self.snapshots.len() > 2 {
+                                    self.snapshots.remove(0);
+                                }
+                                if stop && !done {
+                                    return Err(BittError::Interrupted(self.iteration));
+                                }
+                                None
+                            }
+                            Err(BittError::NonFinite(m)) => Some(m),
+                            Err(e) => return Err(e),
+                        }
+                    } else {
+                        None
                     }
-                    let snapshot = self.snapshot.clone().expect("snapshot taken above");
-                    let mut events = self.events.clone();
-                    self.restore(&snapshot)?;
-                    self.lr_scale *= 0.5;
-                    let note = format!(
-                        "{message}; restored iteration {} and halved the learning rate",
-                        snapshot.iteration
-                    );
-                    events.push((self.iteration, note.clone()));
-                    self.events = events;
-                    observer.recovered(self.iteration, &note);
-                    continue;
                 }
+                Err(BittError::NonFinite(message)) => Some(message),
                 Err(e) => return Err(e),
-            }
-            let done = self.iteration == self.config.iterations;
-            let stop = observer.should_stop();
-            if done || stop || self.iteration.is_multiple_of(self.config.checkpoint_every) {
-                let c = self.checkpoint(seconds(self))?;
-                if let Some(path) = checkpoint_path {
-                    c.save(path)?;
-                }
-                self.snapshot = Some(c);
-            }
-            if stop && !done {
-                return Err(BittError::Interrupted(self.iteration));
+            };
+            if let Some(message) = failure {
+                self.recover(&message, checkpoint_path, seconds(self), observer)?;
             }
         }
         Ok(())
     }
 
-    /// Seconds trained so far by the last `train` call's snapshot.
+    /// Goes back to the last good state after a non-finite loss (see [`Trainer::train`]).
+    fn recover(
+        &mut self,
+        message: &str,
+        checkpoint_path: Option<&Path>,
+        seconds: f64,
+        observer: &mut dyn Observer,
+    ) -> Result<(), BittError> {
+        let failed_at = self.iteration;
+        // The latest state's own forward pass failed: it is not a state to go back to.
+        if self.snapshots.last().is_some_and(|s| !s.verified) && self.snapshots.len() > 1 {
+            self.snapshots.pop();
+        }
+        let Some(good) = self.snapshots.last().cloned() else {
+            return Err(BittError::NonFinite(format!(
+                "{message}; no earlier state to go back to"
+            )));
+        };
+        if !good.verified {
+            return Err(BittError::NonFinite(format!(
+                "{message}; the networks' first forward pass from iteration {} is not finite, \
+                 and there is no earlier state to go back to",
+                good.checkpoint.iteration
+            )));
+        }
+        let scale = self.lr_scale * RECOVERY_LR_FACTOR;
+        let mut events = self.events.clone();
+        let exhausted = events.len() >= MAX_NON_FINITE;
+        let seconds_before = self.seconds_before;
+        self.restore(&good.checkpoint)?;
+        self.seconds_before = seconds_before;
+        let note = if exhausted {
+            format!(
+                "{message}; gave up after {MAX_NON_FINITE} recoveries and went back to \
+                 iteration {}",
+                good.checkpoint.iteration
+            )
+        } else {
+            self.lr_scale = scale;
+            format!(
+                "{message}; went back to iteration {} and lowered the learning rate to {:.3e} \
+                 (x{scale})",
+                good.checkpoint.iteration,
+                self.learning_rate()
+            )
+        };
+        events.push((failed_at, note.clone()));
+        self.events = events;
+        // The state gone back to, with its new rate and events, replaces the failed one on
+        // disk too, so a resume starts from it.
+        let c = Checkpoint {
+            lr_scale: self.lr_scale,
+            events: self.events.clone(),
+            seconds,
+            ..good.checkpoint
+        };
+        if let Some(path) = checkpoint_path {
+            c.save(path)?;
+        }
+        *self.snapshots.last_mut().expect("a good state") = Snapshot {
+            checkpoint: c,
+            verified: true,
+        };
+        observer.recovered(failed_at, &note);
+        if exhausted {
+            return Err(BittError::RecoveryExhausted {
+                message: message.to_string(),
+                count: MAX_NON_FINITE,
+                restored: self.iteration,
+            });
+        }
+        Ok(())
+    }
+
+    /// Seconds trained so far by the last `train` call's latest state.
     pub fn seconds(&self) -> f64 {
-        self.snapshot
-            .as_ref()
-            .map_or(self.seconds_before, |s| s.seconds)
+        self.snapshots
+            .last()
+            .map_or(self.seconds_before, |s| s.checkpoint.seconds)
     }
 }
 

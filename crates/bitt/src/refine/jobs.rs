@@ -19,8 +19,8 @@ use crate::config::TrainConfig;
 use crate::input::ImageInput;
 use crate::metrics::mask_iou;
 use crate::real::{
-    BITT_CROP_SIZE, HandSource, PriorSource, check_sources, hands_in_image, load_models,
-    read_image, reference_crop_box, texture_model,
+    BITT_CROP_SIZE, HandSource, PriorSource, check_hand_placement, check_sources, hands_in_image,
+    load_models, read_image, reference_crop_box, texture_model,
 };
 
 /// The refined hands file of `bitt refine-hands`.
@@ -276,6 +276,7 @@ pub fn refine_photo_hands(
             image.display()
         )));
     }
+    check_hand_placement(scene, &models, image)?;
     let b = hands_in_image(scene, &models, image)?;
     // The fit sees the threshold mask without its specks (point lights); it is scored
     // against the mask as the rule gives it.
