@@ -81,20 +81,6 @@ fn metadata_checksum(meta: &HashMap<String, String>) -> String {
     checksum(text.as_bytes())
 }
 
-impl LossTerms {
-    fn row(&self) -> [f64; HISTORY_COLUMNS] {
-        [
-            self.rec_fine,
-            self.rec_coarse,
-            self.rec_albedo,
-            self.nv,
-            self.alb,
-            self.sym,
-            self.total,
-        ]
-    }
-}
-
 impl Checkpoint {
     /// Writes the checkpoint to `path` atomically.
     pub fn save(&self, path: &Path) -> Result<(), BittError> {
@@ -119,7 +105,7 @@ impl Checkpoint {
                 }
             }
         }
-        let history: Vec<f64> = self.history.iter().flat_map(|h| h.row()).collect();
+        let history: Vec<f64> = self.history.iter().flat_map(|h| h.values()).collect();
         entries.push((
             "history".into(),
             Dtype::F64,
@@ -341,10 +327,9 @@ impl Checkpoint {
             adam_m.push(m);
             adam_v.push(v);
         }
-        if !(lr_scale.is_finite() && lr_scale > 0.0 && lr_scale <= 1.0)
-            || !(seconds.is_finite() && seconds >= 0.0)
-            || history.len() != iteration
-        {
+        let progress_ok =
+            lr_scale > 0.0 && lr_scale <= 1.0 && seconds.is_finite() && seconds >= 0.0;
+        if !progress_ok || history.len() != iteration {
             return Err(bad(format!(
                 "inconsistent progress: iteration {iteration}, {} losses, lr scale {lr_scale}, \
                  {seconds} s",
@@ -410,7 +395,7 @@ mod tests {
         let back = Checkpoint::load(&path).unwrap();
         assert_eq!(back, c);
         for (a, b) in back.history.iter().zip(&c.history) {
-            assert_eq!(a.row().map(f64::to_bits), b.row().map(f64::to_bits));
+            assert_eq!(a.values().map(f64::to_bits), b.values().map(f64::to_bits));
         }
         std::fs::write(&path, b"not a checkpoint").unwrap();
         let e = Checkpoint::load(&path).unwrap_err().to_string();

@@ -57,8 +57,8 @@ impl LossTerms {
         }
     }
 
-    /// Every value finite.
-    pub fn is_finite(&self) -> bool {
+    /// The six terms in [`LossTerms::NAMES`] order, then the total.
+    pub fn values(&self) -> [f64; 7] {
         [
             self.rec_fine,
             self.rec_coarse,
@@ -68,8 +68,11 @@ impl LossTerms {
             self.sym,
             self.total,
         ]
-        .iter()
-        .all(|x| x.is_finite())
+    }
+
+    /// Every value finite.
+    pub fn is_finite(&self) -> bool {
+        self.values().iter().all(|x| x.is_finite())
     }
 }
 

@@ -1669,9 +1669,8 @@ mod tests {
         assert!(((g[0] + g[2]) / 2.0 - 50.0).abs() < 1e-12);
     }
 
-    #[test]
-    fn crop_keeps_projections_consistent() {
-        // The procedural hands in front of a 200 x 120 camera.
+    /// The procedural hands side by side, 0.7 m in front of a 200 x 120 camera.
+    fn hands_before_a_small_camera() -> (HandPair, TwoHandScene) {
         let models = procedural_pair();
         let mut hands = TwoHandScene {
             left: Some(bitt_mesh::HandParams::mean_pose()),
@@ -1687,6 +1686,12 @@ mod tests {
             p.trans = DVec3::new(x - 0.09, -0.01, 0.7);
             p.root_rotation = DMat3::IDENTITY;
         }
+        (models, hands)
+    }
+
+    #[test]
+    fn crop_keeps_projections_consistent() {
+        let (models, hands) = hands_before_a_small_camera();
         let image = vec![0.5f32; 3 * 200 * 120];
         let v = prepare_view("train", Path::new("x.png"), image, &hands, &models, 32).unwrap();
         assert_eq!(v.image.len(), 3 * 32 * 32);
@@ -1725,21 +1730,7 @@ mod tests {
     /// when the other hand is fine.
     #[test]
     fn each_hand_must_be_in_front_of_the_camera_and_in_the_image() {
-        let models = procedural_pair();
-        let mut hands = TwoHandScene {
-            left: Some(bitt_mesh::HandParams::mean_pose()),
-            right: Some(bitt_mesh::HandParams::mean_pose()),
-            camera: PinholeCamera::looking_down_z(300.0, 200, 120),
-            frame: Default::default(),
-        };
-        for (side, x) in [(Side::Left, -0.07), (Side::Right, 0.07)] {
-            let p = match side {
-                Side::Left => hands.left.as_mut().unwrap(),
-                Side::Right => hands.right.as_mut().unwrap(),
-            };
-            p.trans = DVec3::new(x - 0.09, -0.01, 0.7);
-            p.root_rotation = DMat3::IDENTITY;
-        }
+        let (models, hands) = hands_before_a_small_camera();
         let source = Path::new("frame.pkl");
         check_hand_placement(&hands, &models, source).unwrap();
         let moved = |offset: DVec3| {
