@@ -1,7 +1,6 @@
 //! `bitt eval` and `bitt eval-merge`: the paper's evaluation protocol on the synthetic
 //! benchmark (crate `bitt`, module `benchmark`), resumable and shardable.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -21,6 +20,7 @@ use bitt_nets::Preset;
 use bitt_synth::{BENCHMARK_SCENES, MeshNoise, SynthConfig};
 
 use crate::device::DeviceName;
+use crate::progress::ProgressLine;
 use crate::train_scene::{sources, training_config};
 use bitt::lpips::LpipsVgg;
 
@@ -131,9 +131,10 @@ fn result_path(out: &Path, setting: MeshSetting, seed: u64) -> PathBuf {
         .join(format!("{}-{seed:016x}.json", setting.key()))
 }
 
-/// Progress over the whole evaluation: BiTT iterations are the unit of work.
+/// Progress over the whole evaluation (`crate::progress`): BiTT iterations are the unit of
+/// work.
 struct EvalBar {
-    started: Instant,
+    line: ProgressLine,
     done: usize,
     total: usize,
     label: String,
@@ -142,19 +143,14 @@ struct EvalBar {
 impl Observer for EvalBar {
     fn iteration(&mut self, p: &Progress) {
         self.done += 1;
-        let per = self.started.elapsed().as_secs_f64() / self.done.max(1) as f64;
+        let per = self.line.elapsed() / self.done.max(1) as f64;
         let eta = per * self.total.saturating_sub(self.done) as f64;
-        eprint!(
-            "\r{} it {}/{} loss {:.4} | eval {}/{} ETA {:.0} min   ",
-            self.label,
-            p.iteration,
-            p.iterations,
-            p.terms.total,
-            self.done,
-            self.total,
-            eta / 60.0
+        let label = format!(
+            "{} it {}/{} loss {:.4} | eval ",
+            self.label, p.iteration, p.iterations, p.terms.total
         );
-        let _ = std::io::stderr().flush();
+        let text = format!("ETA {:.0} min", eta / 60.0);
+        self.line.show(&label, self.done, self.total, &text);
     }
     fn recovered(&mut self, iteration: usize, message: &str) {
         eprintln!("\nrecovered at iteration {iteration}: {message}");
@@ -278,7 +274,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         .count()
         .max(usize::from(methods.contains(&Method::Html)));
     let mut bar = EvalBar {
-        started: Instant::now(),
+        line: ProgressLine::open_ended(),
         done: 0,
         total: todo.len() * trainings * config.iterations,
         label: String::new(),
@@ -421,7 +417,7 @@ fn run_interhand(
         .count()
         .max(usize::from(e.methods.contains(&Method::Html)));
     let mut bar = EvalBar {
-        started: Instant::now(),
+        line: ProgressLine::open_ended(),
         done: 0,
         total: wanted.min(captures.len()).div_ceil(shards) * trainings * e.config.iterations,
         label: String::new(),

@@ -2,9 +2,7 @@
 //! JSON); writes `hands.json`, `fit.json` and `overlay.png`. With `--scene`, the same fit on
 //! synthetic scenes from their noisy true keypoints, scored against the true hands.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use bitt::fit::{
@@ -17,6 +15,7 @@ use bitt_nets::Preset;
 use bitt_synth::SynthScene;
 
 use crate::device::DeviceName;
+use crate::progress::ProgressLine;
 use crate::refine_hands::{RefineBar, refine_config};
 use crate::train_scene::{HandsArgs, training_config};
 
@@ -155,19 +154,17 @@ pub struct FitHandsArgs {
     pub cache: PathBuf,
 }
 
-/// A redrawn one-line bar on a terminal, plain lines every 50 iterations otherwise.
+/// The keypoint fit's progress line (`crate::progress`; its plan grows with each restart, so
+/// the caller ends the line).
 pub(crate) struct FitBar {
-    started: Instant,
-    terminal: bool,
+    line: ProgressLine,
     quiet: bool,
 }
 
 impl FitBar {
     pub(crate) fn new() -> Self {
-        use std::io::IsTerminal;
         FitBar {
-            started: Instant::now(),
-            terminal: std::io::stderr().is_terminal(),
+            line: ProgressLine::open_ended(),
             quiet: false,
         }
     }
@@ -185,25 +182,13 @@ impl FitObserver for FitBar {
         if self.quiet {
             return;
         }
-        let width = 30;
-        let filled = (width * p.iteration / p.iterations.max(1)).min(width);
-        let line = format!(
-            "fit [{}{}] {}/{} {:10} loss {:.4} {:.1} s",
-            "#".repeat(filled),
-            "-".repeat(width - filled),
-            p.iteration,
-            p.iterations,
+        let text = format!(
+            "{:10} loss {:.4} {:.1} s",
             p.stage,
             p.loss,
-            self.started.elapsed().as_secs_f64()
+            self.line.elapsed()
         );
-        if self.terminal {
-            eprint!("\r{line}   ");
-        } else if p.iteration.is_multiple_of(50) || p.iteration == 1 || p.iteration == p.iterations
-        {
-            eprintln!("{line}");
-        }
-        let _ = std::io::stderr().flush();
+        self.line.show("fit ", p.iteration, p.iterations, &text);
     }
 }
 

@@ -12,6 +12,7 @@ mod fit_hands;
 mod metrics;
 mod nets;
 mod pose_hands;
+mod progress;
 mod refine_hands;
 mod render;
 mod render_avatar;

@@ -1,9 +1,7 @@
 //! `bitt refine-hands`: fit both hands' pose, shape, root and translation to the photo
 //! through the differentiable renderer; writes `hands.json`, `refine.json` and `overlay.png`.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use bitt::refine::{
@@ -14,6 +12,7 @@ use bitt_nets::Preset;
 use bitt_synth::SynthScene;
 
 use crate::device::DeviceName;
+use crate::progress::ProgressLine;
 use crate::train_scene::{HandsArgs, training_config};
 
 /// Arguments of `bitt refine-hands`.
@@ -66,48 +65,27 @@ pub struct RefineHandsArgs {
     pub cache: PathBuf,
 }
 
-/// A redrawn one-line bar on a terminal, plain lines every 20 iterations otherwise.
+/// The mesh refinement's progress line (`crate::progress`).
 pub(crate) struct RefineBar {
-    started: Instant,
-    terminal: bool,
+    line: ProgressLine,
 }
 
 impl RefineBar {
     pub(crate) fn new() -> Self {
-        use std::io::IsTerminal;
         RefineBar {
-            started: Instant::now(),
-            terminal: std::io::stderr().is_terminal(),
+            line: ProgressLine::new(),
         }
     }
 }
 
 impl RefineObserver for RefineBar {
     fn iteration(&mut self, p: &RefineProgress) {
-        let width = 30;
-        let filled = width * p.iteration / p.iterations.max(1);
-        let per = self.started.elapsed().as_secs_f64() / p.iteration.max(1) as f64;
-        let line = format!(
-            "refine [{}{}] {}/{} {:5} loss {:.4} IoU {:.3} {:.2} s/it",
-            "#".repeat(filled),
-            "-".repeat(width - filled),
-            p.iteration,
-            p.iterations,
-            p.stage,
-            p.terms.total,
-            p.iou,
-            per
+        let per = self.line.elapsed() / p.iteration.max(1) as f64;
+        let text = format!(
+            "{:5} loss {:.4} IoU {:.3} {:.2} s/it",
+            p.stage, p.terms.total, p.iou, per
         );
-        if self.terminal {
-            eprint!("\r{line}   ");
-            if p.iteration == p.iterations {
-                eprintln!();
-            }
-        } else if p.iteration.is_multiple_of(20) || p.iteration == 1 || p.iteration == p.iterations
-        {
-            eprintln!("{line}");
-        }
-        let _ = std::io::stderr().flush();
+        self.line.show("refine ", p.iteration, p.iterations, &text);
     }
 }
 

@@ -1,7 +1,6 @@
 //! `bitt train-scene`: train BiTT on one scene (synthetic, or real data: an image with its
 //! annotation pickle, or an InterHand2.6M scene) and write the run folder (the main job).
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -43,6 +42,7 @@ use bitt_synth::{SynthConfig, SynthScene};
 
 use crate::device::DeviceName;
 use crate::fit_hands::FitBar;
+use crate::progress::ProgressLine;
 use crate::refine_hands::{RefineBar, refine_config};
 
 /// Arguments of `bitt train-scene`.
@@ -142,36 +142,26 @@ pub struct TrainSceneArgs {
     pub refine_config: Option<PathBuf>,
 }
 
-/// A one-line progress bar on stderr; Ctrl-C sets `stop`.
+/// The training progress line (`crate::progress`); Ctrl-C sets `stop`.
 struct Bar {
-    started: Instant,
+    line: ProgressLine,
     done_before: usize,
     stop: Arc<AtomicBool>,
 }
 
 impl Observer for Bar {
     fn iteration(&mut self, p: &Progress) {
-        let width = 30;
-        let filled = width * p.iteration / p.iterations.max(1);
-        let per =
-            self.started.elapsed().as_secs_f64() / (p.iteration - self.done_before).max(1) as f64;
+        let per = self.line.elapsed() / p.iteration.saturating_sub(self.done_before).max(1) as f64;
         let eta = per * (p.iterations - p.iteration) as f64;
-        eprint!(
-            "\r[{}{}] {}/{} loss {:.4} PSNR {:.2} dB lr {:.1e} {:.2} s/it ETA {:.0} s   ",
-            "#".repeat(filled),
-            "-".repeat(width - filled),
+        self.line.show(
+            "",
             p.iteration,
             p.iterations,
-            p.terms.total,
-            p.psnr,
-            p.learning_rate,
-            per,
-            eta
+            &format!(
+                "loss {:.4} PSNR {:.2} dB lr {:.1e} {:.2} s/it ETA {:.0} s",
+                p.terms.total, p.psnr, p.learning_rate, per, eta
+            ),
         );
-        let _ = std::io::stderr().flush();
-        if p.iteration == p.iterations {
-            eprintln!();
-        }
     }
 
     fn recovered(&mut self, iteration: usize, message: &str) {
@@ -932,7 +922,7 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
     );
     let stop = stop_flag()?;
     let mut bar = Bar {
-        started: Instant::now(),
+        line: ProgressLine::new(),
         done_before: trainer.iteration,
         stop,
     };

@@ -20,6 +20,10 @@ use crate::pipeline::{Outputs, TrainingView, forward};
 /// Non-finite losses tolerated in one run before giving up.
 pub const MAX_NON_FINITE: usize = 8;
 
+/// Held while networks are initialised, which draws from the host backend's one random
+/// generator (see [`Trainer::new`]).
+static NETS_INIT: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// The factor on the learning rate at every recovery from a non-finite loss.
 pub const RECOVERY_LR_FACTOR: f64 = 0.5;
 
@@ -176,11 +180,17 @@ impl Trainer {
         }
         // Initialise on the host backend (seeded), then copy: the same weights on every
         // backend, so runs on flex, ndarray, wgpu and cuda start identically.
-        let host = Device::flex();
-        host.seed(config.seed);
-        let initial = parameters_host(&config.nets.init(&host)?);
-        let nets = load_parameters(config.nets.init(device)?, &initial, device)
-            .map_err(BittError::Invalid)?;
+        let nets = {
+            // The host backend's random generator is one per process: seeding it and drawing
+            // every initial weight is one step, or a training set up on another thread (tests,
+            // a library user) would take draws in between and change these weights.
+            let _only_us = NETS_INIT.lock().unwrap_or_else(|e| e.into_inner());
+            let host = Device::flex();
+            host.seed(config.seed);
+            let initial = parameters_host(&config.nets.init(&host)?);
+            load_parameters(config.nets.init(device)?, &initial, device)
+                .map_err(BittError::Invalid)?
+        };
         let view = TrainingView::new(&assets, geometry, image, mask, device)?;
         for (side, visible) in ["left", "right"].into_iter().zip(view.visible_fraction()) {
             if visible <= 0.0 {
@@ -323,7 +333,10 @@ impl Trainer {
 
     /// Restores a checkpoint (from [`Trainer::checkpoint`] or a file) into this trainer.
     pub fn restore(&mut self, c: &Checkpoint) -> Result<(), BittError> {
-        let fresh = self.config.nets.init(&self.device)?;
+        let fresh = {
+            let _only_us = NETS_INIT.lock().unwrap_or_else(|e| e.into_inner());
+            self.config.nets.init(&self.device)?
+        };
         self.nets = load_parameters(fresh, &c.parameters, &self.device).map_err(|e| {
             BittError::Invalid(format!("checkpoint does not fit the networks: {e}"))
         })?;
