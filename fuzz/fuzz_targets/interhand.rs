@@ -6,33 +6,9 @@
 
 #![no_main]
 
-use std::path::Path;
+#[path = "../checks.rs"]
+mod checks;
 
-use bitt_mesh::interhand::{InterHandDataset, InterHandPaths, InterHandSelection};
-use libfuzzer_sys::fuzz_target;
-
-fuzz_target!(|data: &[u8]| {
-    let mut parts = data.splitn(3, |&b| b == 0);
-    let (d, c, m) = (
-        parts.next().unwrap_or(&[]),
-        parts.next().unwrap_or(&[]),
-        parts.next().unwrap_or(&[]),
-    );
-    let paths = InterHandPaths::new(Path::new("/nonexistent/bitt-fuzz"), "test");
-    let set = match InterHandDataset::from_json_bytes(paths, d, c, m) {
-        Ok(set) => set,
-        Err(e) => {
-            assert!(e.to_string().contains("InterHand2.6M_test_"), "{e}");
-            return;
-        }
-    };
-    let _ = set.counts.to_string();
-    for capture in set.captures() {
-        for frame in set.frames(capture) {
-            for entry in set.cameras(capture, frame) {
-                let _ = set.scene(entry);
-            }
-        }
-    }
-    let _ = set.select(&InterHandSelection::default());
+libfuzzer_sys::fuzz_target!(|data: &[u8]| {
+    checks::interhand(data);
 });

@@ -4,23 +4,9 @@
 
 #![no_main]
 
-use std::path::Path;
+#[path = "../checks.rs"]
+mod checks;
 
-use bitt_mesh::HandParams;
-use bitt_mesh::mano::{from_safetensors, to_safetensors};
-use libfuzzer_sys::fuzz_target;
-
-fuzz_target!(|data: &[u8]| {
-    let path = Path::new("fuzz.safetensors");
-    match from_safetensors(data, path) {
-        Ok(model) => {
-            model.validate().expect("a loaded model is valid");
-            let posed = model.forward(&HandParams::mean_pose());
-            assert!(posed.is_ok(), "{posed:?}");
-            let bytes = to_safetensors(&model).expect("a loaded model writes");
-            let back = from_safetensors(&bytes, path).expect("a written model reads");
-            assert_eq!(back, model);
-        }
-        Err(e) => assert!(e.to_string().contains("fuzz.safetensors"), "{e}"),
-    }
+libfuzzer_sys::fuzz_target!(|data: &[u8]| {
+    checks::mano_safetensors(data);
 });

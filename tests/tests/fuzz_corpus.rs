@@ -4,15 +4,17 @@
 //! in code by [`write_fuzz_seeds`]) must still read. Needs neither the network nor
 //! `../shared`.
 
+#[path = "../../fuzz/checks.rs"]
+mod checks;
+
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
 
-use bitt_mesh::annotation::{FrameInfo, TwoHandScene, bitt_annotation_from_bytes, hands_json};
+use bitt_mesh::annotation::{FrameInfo, TwoHandScene, hands_json};
 use bitt_mesh::glam::{DMat3, DVec2, DVec3};
-use bitt_mesh::interhand::{InterHandDataset, InterHandPaths};
-use bitt_mesh::keypoints::{KeypointFormat, KeypointOptions, parse_keypoints};
-use bitt_mesh::mano::{from_safetensors, to_safetensors};
-use bitt_mesh::model::{MANO_PARENTS, NUM_BETAS, NUM_JOINTS, NUM_POSE, NUM_POSE_FEATURES};
+use bitt_mesh::interhand::InterHandPaths;
+use bitt_mesh::mano::to_safetensors;
+use bitt_mesh::model::{NUM_BETAS, NUM_POSE};
 use bitt_mesh::{HandModel, HandParams, HandPose, PinholeCamera, Side, UvLayout};
 use bitt_tests::pickle_writer::{write_protocol2, write_protocol4};
 use bitt_tests::real_fixture::{self, AnnotationOptions};
@@ -49,177 +51,48 @@ fn replay(target: &str, read: impl Fn(&[u8]) -> bool) -> usize {
 
 #[test]
 fn from_bytes_corpus_replays() {
-    replay("from_bytes", |b| {
-        match bitt_pickle::from_bytes(b, "c.pkl") {
-            Ok(_) => true,
-            Err(e) => {
-                assert!(
-                    e.offset <= b.len() && e.to_string().contains("c.pkl"),
-                    "{e}"
-                );
-                false
-            }
-        }
-    });
+    replay("from_bytes", checks::from_bytes);
 }
 
 #[test]
 fn torch_corpus_replays() {
-    replay("torch", |b| {
-        match bitt_pickle::torch_from_bytes(b, "c.pth") {
-            Ok(_) => true,
-            Err(e) => {
-                assert!(
-                    e.offset <= b.len() && e.to_string().contains("c.pth"),
-                    "{e}"
-                );
-                false
-            }
-        }
-    });
+    replay("torch", checks::torch);
 }
 
 #[test]
 fn mano_safetensors_corpus_replays() {
-    let path = Path::new("c.safetensors");
-    replay("mano_safetensors", |b| match from_safetensors(b, path) {
-        Ok(model) => {
-            model.forward(&HandParams::mean_pose()).unwrap();
-            let back = from_safetensors(&to_safetensors(&model).unwrap(), path).unwrap();
-            assert_eq!(back, model);
-            true
-        }
-        Err(e) => {
-            assert!(e.to_string().contains("c.safetensors"), "{e}");
-            false
-        }
-    });
+    replay("mano_safetensors", checks::mano_safetensors);
 }
 
 #[test]
 fn annotation_corpus_replays() {
-    let models = tiny_pair();
-    let path = Path::new("c.annotation");
-    replay("annotation", |b| {
-        match bitt_annotation_from_bytes(b, path, (256, 256)) {
-            Ok(scene) => {
-                let _ = scene.pose_in_camera(&models);
-                true
-            }
-            Err(e) => {
-                assert!(e.to_string().contains("c.annotation"), "{e}");
-                false
-            }
-        }
-    });
-}
-
-/// The fuzz target's input: the data, camera and MANO files joined by NUL bytes.
-fn interhand(b: &[u8]) -> bool {
-    let mut parts = b.splitn(3, |&x| x == 0);
-    let mut next = || parts.next().unwrap_or(&[]);
-    let (d, c, m) = (next(), next(), next());
-    let paths = InterHandPaths::new(Path::new("/nonexistent/bitt-corpus"), "test");
-    match InterHandDataset::from_json_bytes(paths, d, c, m) {
-        Ok(set) => {
-            let mut scenes = 0;
-            for capture in set.captures() {
-                for frame in set.frames(capture) {
-                    for entry in set.cameras(capture, frame) {
-                        scenes += usize::from(set.scene(entry).is_ok());
-                    }
-                }
-            }
-            scenes > 0
-        }
-        Err(e) => {
-            assert!(e.to_string().contains("InterHand2.6M_test_"), "{e}");
-            false
-        }
-    }
+    replay("annotation", checks::annotation);
 }
 
 #[test]
 fn interhand_corpus_replays() {
-    replay("interhand", interhand);
-}
-
-/// The fuzz target's input: an options byte, then the file.
-fn keypoints(b: &[u8]) -> bool {
-    let Some((&sel, file)) = b.split_first() else {
-        return false;
-    };
-    let options = KeypointOptions {
-        format: match sel & 3 {
-            0 => None,
-            1 => Some(KeypointFormat::OpenPose),
-            2 => Some(KeypointFormat::MediaPipe),
-            _ => Some(KeypointFormat::Plain),
-        },
-        image_size: match (sel >> 2) & 3 {
-            0 => [0, 0],
-            1 => [640, 480],
-            2 => [1, 1],
-            _ => [u32::MAX, 3],
-        },
-        mirrored: sel & 16 != 0,
-    };
-    match parse_keypoints(file, Path::new("c.json"), &options) {
-        Ok(k) => {
-            let text = k.to_plain_json();
-            parse_keypoints(text.as_bytes(), Path::new("c.json"), &Default::default())
-                .unwrap_or_else(|e| panic!("{text}: {e}"));
-            true
-        }
-        Err(e) => {
-            assert!(e.to_string().starts_with("c.json: "), "{e}");
-            false
-        }
-    }
+    replay("interhand", checks::interhand);
 }
 
 #[test]
 fn keypoints_corpus_replays() {
-    replay("keypoints", keypoints);
+    replay("keypoints", checks::keypoints);
 }
 
 // -------------------------------------------------------------------------------------------
 // Seeds.
 
-/// A valid one-vertex model (MANO's joint tree): small enough to fuzz, cheap to pose.
+/// The fuzz targets' one-vertex model, with a one-vertex UV layout when `uv`.
 fn tiny_model(side: Side, uv: bool) -> HandModel {
     HandModel {
-        side,
-        source: "tiny".into(),
-        v_template: vec![DVec3::new(0.01, 0.02, 0.03)],
-        faces: vec![[0, 0, 0]],
-        joint_regressor: vec![1.0; NUM_JOINTS],
-        skinning_weights: (0..NUM_JOINTS)
-            .map(|j| f64::from(u8::from(j == 0)))
-            .collect(),
-        parents: MANO_PARENTS.to_vec(),
-        shape_dirs: vec![0.01; 3 * NUM_BETAS],
-        pose_dirs: vec![0.001; 3 * NUM_POSE_FEATURES],
-        pose_pca_components: (0..NUM_POSE * NUM_POSE)
-            .map(|i| f64::from(u8::from(i % (NUM_POSE + 1) == 0)))
-            .collect(),
-        pose_pca_mean: vec![0.1; NUM_POSE],
-        fingertips: [0; 5],
         uv: uv.then(|| UvLayout {
             uvs: vec![DVec2::new(0.25, 0.75)],
             faces: vec![[0, 0, 0]],
         }),
+        ..checks::tiny_model(side)
     }
 }
 
-fn tiny_pair() -> bitt_mesh::HandPair {
-    bitt_mesh::HandPair {
-        left: tiny_model(Side::Left, false),
-        right: tiny_model(Side::Right, false),
-    }
-}
-
-/// 21 keypoints along a line, as `[x, y, c]` text.
 fn points(x0: f64) -> Vec<String> {
     (0..21)
         .map(|i| {
@@ -286,7 +159,7 @@ fn seeds() -> Vec<(&'static str, String, Vec<u8>)> {
         .unwrap(),
         frame: FrameInfo::default(),
     };
-    let text = hands_json(&scene, &tiny_pair()).unwrap();
+    let text = hands_json(&scene, &checks::tiny_pair()).unwrap();
     out.push(("annotation", "seed_hands.json".into(), text.into_bytes()));
     // InterHand: the miniature dataset of the InterHand tests, and a one-image one.
     let root = real_fixture::scratch("fuzz-seeds");
@@ -371,13 +244,12 @@ fn write_fuzz_seeds() {
 fn fuzz_seeds_read() {
     for (target, name, bytes) in seeds() {
         let ok = match target {
-            "torch" => bitt_pickle::torch_from_bytes(&bytes, &name).is_ok(),
-            "mano_safetensors" => from_safetensors(&bytes, Path::new(&name)).is_ok(),
-            "annotation" => bitt_annotation_from_bytes(&bytes, Path::new(&name), (256, 256))
-                .map_err(|e| panic!("{name}: {e}"))
-                .is_ok(),
-            "interhand" => interhand(&bytes),
-            "keypoints" => keypoints(&bytes),
+            "from_bytes" => checks::from_bytes(&bytes),
+            "torch" => checks::torch(&bytes),
+            "mano_safetensors" => checks::mano_safetensors(&bytes),
+            "annotation" => checks::annotation(&bytes),
+            "interhand" => checks::interhand(&bytes),
+            "keypoints" => checks::keypoints(&bytes),
             other => panic!("unknown target {other}"),
         };
         assert!(ok, "{target}: seed {name} does not read");
