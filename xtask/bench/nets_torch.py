@@ -1,5 +1,6 @@
-"""PyTorch baseline for `cargo xtask bench`: BTR and the albedo U-Net, written from the
-BiTT paper (CVPR 2024, supplement D) for timing only.
+"""PyTorch baseline for `cargo xtask bench`: BTR, the albedo U-Net, and a training step of
+all four networks (with the light and HTML encoders and Adam), written from the BiTT paper
+(CVPR 2024, supplement D) for timing only.
 
 Prints one JSON object: the network, its parameter count, the input shape and the wall
 time of each forward+backward run (seconds). Same structure as crates/bitt-nets.
@@ -122,28 +123,84 @@ def albedo_unet(ngf=64, num_downs=6):
     return UnetLevel(3, ngf, 3, net, "outer")
 
 
+class ConvEncoder(nn.Module):
+    """The stride-2 encoder of the light and HTML networks (crates/bitt-nets/src/encoder.rs):
+    log2(S) - 1 convs 4x4 stride 2 without bias (padding 1, the last 0), widths
+    base * 2^i capped at 8 base, ReLU; a 1x1 conv to the outputs; tanh."""
+
+    def __init__(self, outputs, image, base):
+        super().__init__()
+        n = image.bit_length() - 2
+        widths = [min(base << i, 8 * base) for i in range(n)]
+        layers, cin = [], 3
+        for i, w in enumerate(widths):
+            layers.append(nn.Conv2d(cin, w, 4, 2, 0 if i + 1 == n else 1, bias=False))
+            cin = w
+        self.layers = nn.ModuleList(layers)
+        self.out = nn.Conv2d(cin, outputs, 1, bias=False)
+
+    def forward(self, x):
+        for layer in self.layers:
+            x = F.relu(layer(x))
+        return torch.tanh(self.out(x).flatten(1))
+
+
+class FourNets(nn.Module):
+    def __init__(self, args):
+        super().__init__()
+        self.light = ConvEncoder(12, args.image, args.light_base)
+        self.html = ConvEncoder(2 * args.coefficients, args.image, args.html_base)
+        self.albedo = albedo_unet(args.ngf, args.num_downs)
+        self.btr = Btr([int(c) for c in args.channels.split(",")])
+
+
 def main():
     p = argparse.ArgumentParser()
-    p.add_argument("net", choices=["btr", "albedo"])
+    p.add_argument("net", choices=["btr", "albedo", "step"])
     p.add_argument("--texels", type=int, default=206330)
     p.add_argument("--channels", default="16,64,128,256")
     p.add_argument("--image", type=int, default=256)
     p.add_argument("--ngf", type=int, default=64)
     p.add_argument("--num-downs", type=int, default=6)
     p.add_argument("--runs", type=int, default=2)
+    p.add_argument("--light-base", type=int, default=32)
+    p.add_argument("--html-base", type=int, default=64)
+    p.add_argument("--coefficients", type=int, default=101)
     args = p.parse_args()
     torch.manual_seed(0)
     if args.net == "btr":
         net = Btr([int(c) for c in args.channels.split(",")])
         inputs = [torch.rand(1, 3, args.texels), torch.rand(1, 3, args.texels)]
         shape = [1, 3, args.texels]
-    else:
+    elif args.net == "albedo":
         net = albedo_unet(args.ngf, args.num_downs)
         inputs = [torch.rand(1, 3, args.image, args.image)]
         shape = [1, 3, args.image, args.image]
+    else:
+        net = FourNets(args)
+        image = torch.rand(1, 3, args.image, args.image)
+        batch = torch.rand(4, 3, args.image, args.image)
+        texels = [torch.rand(1, 3, args.texels), torch.rand(1, 3, args.texels)]
+        shape = [1, 3, args.image, args.image]
     params = sum(p.numel() for p in net.parameters())
     seconds = []
-    for _ in range(args.runs):
+    if args.net == "step":
+        adam = torch.optim.Adam(net.parameters(), lr=1e-3)
+        for _ in range(args.runs):
+            adam.zero_grad(set_to_none=True)
+            start = time.perf_counter()
+            left, right = net.btr(*texels)
+            loss = (
+                net.light(image).square().mean()
+                + net.html(image).square().mean()
+                + net.albedo(batch).square().mean()
+                + left.square().mean()
+                + right.square().mean()
+            )
+            loss.backward()
+            adam.step()
+            seconds.append(time.perf_counter() - start)
+    for _ in range(args.runs if args.net != "step" else 0):
         net.zero_grad(set_to_none=True)
         start = time.perf_counter()
         out = net(*inputs)

@@ -6,7 +6,12 @@
 //!   flex, against the PyTorch module of `xtask/bench/nets_torch.py` on the CPU.
 //! - `bench albedo [--preset P] [--runs N]`: the same for the albedo U-Net at the preset's
 //!   image size (256 x 256 for `paper`).
-//! - `bench nets`: both.
+//! - `bench step [--preset P] [--runs N]`: a training step of the four networks as the
+//!   trainer runs them (light and HTML encoders on one image, the albedo U-Net on a batch of
+//!   4, BTR on both hands): forward, backward and the Adam update, against the same step of
+//!   the PyTorch modules with `torch.optim.Adam`. Rendering, unwrapping and the losses are
+//!   not in it (the reference renders with PyTorch3D).
+//! - `bench nets`: BTR and the albedo U-Net.
 //!
 //! The burn side runs in the release `bitt bench-nets`; the PyTorch side with `python3`
 //! (override with `BITT_PYTHON`). When torch is not importable the burn timings are still
@@ -26,19 +31,20 @@ use anyhow::{Context, Result, bail};
 pub fn bench(args: &[String]) -> Result<()> {
     let Some((what, rest)) = args.split_first() else {
         bail!(
-            "usage: cargo xtask bench <btr|albedo|nets> [--preset P] [--runs N] [--conv C] \
+            "usage: cargo xtask bench <btr|albedo|step|nets> [--preset P] [--runs N] [--conv C] \
              | cargo xtask bench render [--runs N]"
         );
     };
     match what.as_str() {
         "btr" => net_vs_torch("btr", rest),
         "albedo" => net_vs_torch("albedo", rest),
+        "step" => net_vs_torch("step", rest),
         "nets" => {
             net_vs_torch("btr", rest)?;
             net_vs_torch("albedo", rest)
         }
         "render" => crate::bench_render::run(rest),
-        other => bail!("unknown benchmark `{other}`; try btr, albedo, nets, render"),
+        other => bail!("unknown benchmark `{other}`; try btr, albedo, step, nets, render"),
     }
 }
 
@@ -145,28 +151,34 @@ fn net_vs_torch(net: &str, args: &[String]) -> Result<()> {
         .arg(net)
         .arg("--runs")
         .arg(o.runs.to_string());
-    match net {
-        "btr" => {
-            let channels = config["btr"]["channels"]
-                .as_array()
-                .context("btr channels")?
-                .iter()
-                .map(|c| c.to_string())
-                .collect::<Vec<_>>()
-                .join(",");
-            cmd.arg("--texels")
-                .arg(texels.to_string())
-                .arg("--channels")
-                .arg(channels);
-        }
-        _ => {
-            cmd.arg("--image")
-                .arg(image.to_string())
-                .arg("--ngf")
-                .arg(config["albedo"]["base_channels"].to_string())
-                .arg("--num-downs")
-                .arg(config["albedo"]["num_downs"].to_string());
-        }
+    let channels = config["btr"]["channels"]
+        .as_array()
+        .context("btr channels")?
+        .iter()
+        .map(|c| c.to_string())
+        .collect::<Vec<_>>()
+        .join(",");
+    if net != "albedo" {
+        cmd.arg("--texels")
+            .arg(texels.to_string())
+            .arg("--channels")
+            .arg(&channels);
+    }
+    if net != "btr" {
+        cmd.arg("--image")
+            .arg(image.to_string())
+            .arg("--ngf")
+            .arg(config["albedo"]["base_channels"].to_string())
+            .arg("--num-downs")
+            .arg(config["albedo"]["num_downs"].to_string());
+    }
+    if net == "step" {
+        cmd.arg("--light-base")
+            .arg(config["light"]["base_channels"].to_string())
+            .arg("--html-base")
+            .arg(config["html"]["base_channels"].to_string())
+            .arg("--coefficients")
+            .arg(config["html"]["coefficients_per_hand"].to_string());
     }
     let torch = json_of(cmd, "nets_torch.py")?;
     let torch_s = best(&torch).context("no torch timings")?;

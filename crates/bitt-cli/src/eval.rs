@@ -12,7 +12,7 @@ use bitt::benchmark::{
 };
 use bitt::outputs::{contact_sheet, write_png};
 use bitt::real::{interhand_views, load_models, real_trainer};
-use bitt::run::texture_prior;
+use bitt::run::texture_prior_with_progress;
 use bitt::{Observer, Progress, TrainConfig};
 use bitt_mesh::export::write_atomically;
 use bitt_mesh::interhand::{InterHandDataset, InterHandSelection};
@@ -286,7 +286,12 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         config.preset,
         config.iterations
     );
-    let pca = texture_prior(&config, Some(&args.cache), &host)?;
+    let pca = texture_prior_with_progress(
+        &config,
+        Some(&args.cache),
+        &host,
+        &crate::progress::PcaFitBar::new(),
+    )?;
     for (k, &(seed, setting)) in todo.iter().enumerate() {
         let synth = SynthConfig {
             size: config.nets.image_size as u32,

@@ -18,6 +18,10 @@ pub enum BenchNet {
     Btr,
     /// The albedo U-Net at the preset's image size.
     Albedo,
+    /// A training step of all four networks as the trainer runs them: light and HTML
+    /// encoders on one image, the albedo U-Net on a batch of 4 (the hand image and the three
+    /// consistency renders), BTR on both hands; forward, backward and the Adam update.
+    Step,
 }
 
 /// The 1-D convolution of BTR (`--conv`).
@@ -180,9 +184,37 @@ pub fn bench(args: &BenchNetsArgs) -> Result<()> {
             }
             (net.num_params(), vec![1, 3, s, s])
         }
+        BenchNet::Step => {
+            let mut nets = config.init(&device)?;
+            let mut adam = bitt::optim::Adam::new(bitt::OptimConfig::default());
+            let image = Tensor::<4>::random([1, 3, s, s], Distribution::Default, &device);
+            let batch = Tensor::<4>::random([4, 3, s, s], Distribution::Default, &device);
+            let left = Tensor::<3>::random([1, 3, t], Distribution::Default, &device);
+            let right = Tensor::<3>::random([1, 3, t], Distribution::Default, &device);
+            for _ in 0..args.runs {
+                seconds.push(time_once(|| {
+                    let out = nets.btr.forward(left.clone(), right.clone());
+                    let loss = mean_square(nets.light.forward(image.clone()))
+                        + mean_square(nets.html.forward(image.clone()))
+                        + mean_square(nets.albedo.forward(batch.clone()))
+                        + mean_square(out.left)
+                        + mean_square(out.right);
+                    let grads = loss.backward();
+                    check_grads(&nets, &grads)?;
+                    nets = adam.step(nets.clone(), &grads, 1e-3);
+                    // Read a parameter back, so the timing includes the whole update.
+                    check_params(&nets)
+                })?);
+            }
+            (nets.num_params(), vec![1, 3, s, s])
+        }
     };
     let out = serde_json::json!({
-        "net": match args.net { BenchNet::Btr => "btr", BenchNet::Albedo => "albedo" },
+        "net": match args.net {
+            BenchNet::Btr => "btr",
+            BenchNet::Albedo => "albedo",
+            BenchNet::Step => "step",
+        },
         "preset": args.preset,
         "device": args.device,
         "conv": format!("{:?}", config.btr.conv),
@@ -192,6 +224,26 @@ pub fn bench(args: &BenchNetsArgs) -> Result<()> {
     });
     println!("{out}");
     Ok(())
+}
+
+/// Reads the first parameter back (its sum must be finite).
+fn check_params<M: Module>(net: &M) -> Result<()> {
+    struct First {
+        value: Option<f32>,
+    }
+    impl burn::module::ModuleVisitor for First {
+        fn visit_float<const D: usize>(&mut self, param: &burn::module::Param<Tensor<D>>) {
+            if self.value.is_none() {
+                self.value = Some(param.val().sum().into_scalar::<f32>());
+            }
+        }
+    }
+    let mut first = First { value: None };
+    net.visit(&mut first);
+    match first.value {
+        Some(v) if v.is_finite() => Ok(()),
+        other => anyhow::bail!("the first parameter's sum is {other:?} after the update"),
+    }
 }
 
 /// Reads one gradient back, so the timing includes the whole backward pass.

@@ -60,6 +60,39 @@ impl ProgressLine {
     }
 }
 
+/// The texture PCA fit's progress (`bitt_texture::FitProgress`): one [`ProgressLine`] per
+/// stage (generating identities, Gram matrix, eigendecomposition, ...), labelled with it.
+#[derive(Debug)]
+pub(crate) struct PcaFitBar {
+    current: std::sync::Mutex<Option<(bitt_texture::FitStage, ProgressLine)>>,
+}
+
+impl PcaFitBar {
+    pub(crate) fn new() -> Self {
+        PcaFitBar {
+            current: std::sync::Mutex::new(None),
+        }
+    }
+}
+
+impl bitt_texture::FitProgress for PcaFitBar {
+    fn report(&self, stage: bitt_texture::FitStage, done: usize, total: usize) {
+        let mut current = self.current.lock().unwrap_or_else(|e| e.into_inner());
+        if current.as_ref().is_none_or(|(s, _)| *s != stage) {
+            *current = Some((stage, ProgressLine::new()));
+        }
+        if let Some((_, line)) = current.as_mut() {
+            let text = format!("{:.0} s", line.elapsed());
+            line.show(
+                &format!("texture PCA: {} ", stage.label()),
+                done,
+                total,
+                &text,
+            );
+        }
+    }
+}
+
 /// Whether a log gets a line at step `done` of `total`: the first, the last, and each step
 /// that crosses another tenth.
 fn plain_line_due(done: usize, total: usize) -> bool {

@@ -29,7 +29,9 @@ use bitt::real::{
 use bitt::refine::{
     MeshRefine, RefineConfig, RefineObserver, Refinement, pca_pose_notes, refine_synthetic,
 };
-use bitt::run::{files, synthetic_trainer, texture_prior, write_run, write_training_refinement};
+use bitt::run::{
+    files, synthetic_trainer, texture_prior_with_progress, write_run, write_training_refinement,
+};
 use bitt::trainer::previous_checkpoint_path;
 use bitt::{Observer, Progress, TrainConfig, Trainer};
 use bitt_mesh::interhand::{
@@ -419,7 +421,12 @@ fn fresh(
         "fitting / loading the texture PCA ({} components)",
         config.texture.components
     );
-    let pca = texture_prior(&config, cache, &device.clone().inner())?;
+    let pca = texture_prior_with_progress(
+        &config,
+        cache,
+        &device.clone().inner(),
+        &crate::progress::PcaFitBar::new(),
+    )?;
     let refinement = match refine {
         Some(r) => {
             eprintln!("refining the given meshes against the training image");
@@ -586,7 +593,12 @@ fn resumed(
             "fitting / loading the texture PCA ({} components)",
             config.texture.components
         );
-        let pca = texture_prior(&config, cache, &device.clone().inner())?;
+        let pca = texture_prior_with_progress(
+            &config,
+            cache,
+            &device.clone().inner(),
+            &crate::progress::PcaFitBar::new(),
+        )?;
         let trainer = synthetic_trainer(&scene, &config, &pca, device)?;
         (trainer, Input::Synthetic(Box::new(scene)))
     };
@@ -1010,15 +1022,19 @@ fn print_summary(out: &Path, s: &bitt::run::RunSummary, real: Option<&RealScores
     }
     if let Some(t) = s.synthetic.as_ref().and_then(|g| g.texture.as_ref()) {
         let f = |v: Option<f64>| v.map_or("n/a".to_string(), |v| format!("{v:.4}"));
+        let (fine, coarse) = (&t.fine.gain_fitted, &t.coarse.gain_fitted);
         println!(
-            "texture L1 on texels invisible in the input: fine {} vs coarse {} \
-             (visible on the other hand: fine {} vs coarse {}; invisible on both: fine {} vs coarse {})",
-            f(t.fine_invisible),
-            f(t.coarse_invisible),
-            f(t.fine_symmetric),
-            f(t.coarse_symmetric),
-            f(t.fine_hidden_both),
-            f(t.coarse_hidden_both)
+            "texture L1 after a gain per channel, texels invisible in the input: fine {} vs coarse {} \
+             (visible on the other hand: fine {} vs coarse {}; invisible on both: fine {} vs coarse {}); \
+             raw: fine {} vs coarse {}",
+            f(fine.not_visible),
+            f(coarse.not_visible),
+            f(fine.symmetric),
+            f(coarse.symmetric),
+            f(fine.invisible),
+            f(coarse.invisible),
+            f(t.fine.raw.not_visible),
+            f(t.coarse.raw.not_visible),
         );
     }
 }

@@ -5,15 +5,18 @@
 //! down to `4 x 4`, the last one (no padding) to `1 x 1`; widths double from
 //! `base_channels` up to `8 base_channels`. A 1x1 convolution (no bias) and tanh give the
 //! output vector.
+//!
+//! Each convolution with its ReLU is one operation (`conv_block`: a custom
+//! operation on flex, burn's layers elsewhere).
 
 use burn::config::Config;
 use burn::module::Module;
 use burn::nn::PaddingConfig2d;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
-use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
 
 use crate::NetsError;
+use crate::conv_block::{Activation, conv_norm_act};
 
 /// Configuration of a [`ConvEncoder`].
 #[derive(Config, Debug)]
@@ -102,9 +105,9 @@ impl ConvEncoder {
         let b = image.dims()[0];
         let mut x = image;
         for layer in &self.layers {
-            x = relu(layer.forward(x));
+            x = conv_norm_act(layer, None, Activation::Relu, x);
         }
-        let x = self.out.forward(x);
+        let x = conv_norm_act(&self.out, None, Activation::Identity, x);
         let c = x.dims()[1];
         x.reshape([b, c]).tanh()
     }
@@ -121,5 +124,58 @@ mod tests {
         assert_eq!(ConvEncoderConfig::new(1, 8, 2).widths(), [2, 4]);
         assert!(ConvEncoderConfig::new(1, 100, 2).validate().is_err());
         assert!(ConvEncoderConfig::new(1, 2, 2).validate().is_err());
+    }
+
+    /// The encoder as burn layers (`relu(conv(x))`, then the 1x1 convolution and tanh).
+    fn reference_forward(e: &ConvEncoder, image: Tensor<4>) -> Tensor<2> {
+        let b = image.dims()[0];
+        let mut x = image;
+        for layer in &e.layers {
+            x = burn::tensor::activation::relu(layer.forward(x));
+        }
+        let x = e.out.forward(x);
+        let c = x.dims()[1];
+        x.reshape([b, c]).tanh()
+    }
+
+    /// With the custom operation on flex: the values, the input's and every parameter's
+    /// gradient of burn's layers; on ndarray the same values through burn's layers.
+    #[test]
+    #[allow(deprecated)] // burn-ndarray, see `test_util::devices`
+    fn encoder_matches_burn_layers_with_gradients() {
+        use crate::test_util::{assert_all_close, assert_close, param_grads, random, to_vec};
+        let device = Device::flex().autodiff();
+        let e = ConvEncoderConfig::new(7, 32, 4).init(&device);
+        let image = random([3, 3, 32, 32], 31, &device).require_grad();
+        let y = e.forward(image.clone());
+        let r = reference_forward(&e, image.clone());
+        assert_close(
+            &to_vec(y.clone()),
+            &to_vec(r.clone()),
+            1e-5,
+            "encoder values",
+        );
+        let g = random([3, 7], 32, &device);
+        let grads = (y * g.clone()).sum().backward();
+        let grads_ref = (r * g).sum().backward();
+        assert_all_close(
+            &param_grads(&e, &grads),
+            &param_grads(&e, &grads_ref),
+            1e-4,
+            "encoder parameter gradients",
+        );
+        assert_close(
+            &to_vec(image.grad(&grads).unwrap()),
+            &to_vec(image.grad(&grads_ref).unwrap()),
+            1e-4,
+            "encoder input gradient",
+        );
+        let flex = Device::flex();
+        let e = ConvEncoderConfig::new(7, 32, 4).init(&flex);
+        let image = random([2, 3, 32, 32], 33, &flex);
+        let on_flex = to_vec(e.forward(image.clone()));
+        let nd = Device::ndarray();
+        let on_nd = to_vec(e.to_device(&nd).forward(image.to_device(&nd)));
+        assert_close(&on_nd, &on_flex, 1e-5, "encoder ndarray vs flex");
     }
 }

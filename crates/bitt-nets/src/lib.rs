@@ -18,6 +18,7 @@
 pub mod albedo;
 pub mod btr;
 pub mod conv1d;
+mod conv_block;
 pub mod encoder;
 pub mod error;
 mod fused;

@@ -48,7 +48,8 @@ mod texture;
 
 pub use error::{MAX_IMAGE_SIDE, RenderError};
 pub use ops::{
-    Raster, SilhouettePairs, Topology, antialias, interpolate, rasterize, silhouette_pairs, texture,
+    AntialiasPlan, Raster, SilhouettePairs, TexturePlan, Topology, antialias, interpolate,
+    rasterize, silhouette_pairs, texture,
 };
 pub use raster::Fragments;
 

@@ -23,9 +23,12 @@ pub use image_io::{
     PlanarImage, load_compact_texture, load_image, save_compact_texture, save_png8, save_png16,
 };
 pub use layout::{LayoutGather, TextureLayout};
-pub use pca::{PcaFitReport, TexturePca, TexturePcaTensors};
+pub use pca::{
+    FitProgress, FitStage, NoProgress, PcaFitReport, PcaProjector, TexturePca, TexturePcaTensors,
+};
 pub use procedural::{
-    EvalReport, ProceduralTextureConfig, SkinIdentity, generate_texture, procedural_texture_pca,
+    EvalReport, ProceduralTextureConfig, SkinIdentity, generate_texture, procedural_texture_model,
+    procedural_texture_pca, procedural_texture_pca_with_progress,
 };
 
 #[cfg(test)]

@@ -10,10 +10,12 @@
 
 use std::collections::HashMap;
 use std::path::Path;
+use std::sync::Mutex;
 
 use bitt_mesh::UvLayout;
 use bitt_mesh::glam::DVec2;
 use burn::tensor::{Device, Tensor, TensorData};
+use rayon::prelude::*;
 use safetensors::Dtype;
 
 use crate::TextureError;
@@ -25,6 +27,117 @@ pub const PCA_FORMAT: &str = "bitt-texture-pca";
 
 /// Sweeps per singular value allowed to `burn::linalg::svd` in [`TexturePca::fit`].
 const SVD_SWEEPS: usize = 100;
+
+/// Values of the texel vector per block of the mean in [`TexturePca::fit_with_progress`]
+/// (one progress step each).
+/// (Tiny in unit tests, so that their small samples span several blocks.)
+const MEAN_BLOCK: usize = if cfg!(test) { 5 } else { 1 << 16 };
+
+/// Basis rows per sign-scan block in [`TexturePca::fit_with_progress`] (one progress step
+/// each).
+const BASIS_BLOCK: usize = if cfg!(test) { 4 } else { 1 << 16 };
+
+/// A stage of a texture PCA fit, as reported to a [`FitProgress`].
+///
+/// [`TexturePca::fit_with_progress`] reports `Centre`, `Gram`, `Eigen`, `Basis` in that order;
+/// [`crate::procedural::procedural_texture_pca_with_progress`] reports `Generate` before them
+/// and `Evaluate` after them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum FitStage {
+    /// Generating the people's skin textures; counts identities (training and held-out
+    /// together; each is both hands).
+    Generate,
+    /// The mean texture and the centred samples; counts blocks of the mean, then samples.
+    Centre,
+    /// The samples' Gram matrix (one matrix product on the fit's device; 0, then 1).
+    Gram,
+    /// Its eigendecomposition through `burn::linalg::svd` (0, then 1).
+    Eigen,
+    /// The basis: the product with the eigenvectors (1 step), then blocks of rows whose
+    /// signs are fixed.
+    Basis,
+    /// Evaluating the fitted model: the normal equations (1 step), then one step per
+    /// projected sample (training, then held-out).
+    Evaluate,
+}
+
+impl FitStage {
+    /// A short lower-case label for a progress bar, e.g. `"generating identities"`.
+    pub fn label(self) -> &'static str {
+        match self {
+            FitStage::Generate => "generating identities",
+            FitStage::Centre => "centring samples",
+            FitStage::Gram => "Gram matrix",
+            FitStage::Eigen => "eigendecomposition",
+            FitStage::Basis => "basis",
+            FitStage::Evaluate => "evaluating",
+        }
+    }
+}
+
+/// Receives the progress of a texture PCA fit: `report(stage, done, total)`.
+///
+/// Every stage starts with `done = 0` and ends with `done = total` (`total >= 1`); within a
+/// stage the counts never decrease, and calls never overlap (they are made one at a time,
+/// under a lock, possibly from worker threads: keep them cheap). Any
+/// `Fn(FitStage, usize, usize) + Sync` closure is a `FitProgress`; [`NoProgress`] ignores
+/// everything.
+pub trait FitProgress: Sync {
+    /// `done` of `total` steps of `stage` are finished.
+    fn report(&self, stage: FitStage, done: usize, total: usize);
+}
+
+impl<F: Fn(FitStage, usize, usize) + Sync> FitProgress for F {
+    fn report(&self, stage: FitStage, done: usize, total: usize) {
+        self(stage, done, total);
+    }
+}
+
+/// A [`FitProgress`] that ignores every report.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct NoProgress;
+
+impl FitProgress for NoProgress {
+    fn report(&self, _stage: FitStage, _done: usize, _total: usize) {}
+}
+
+/// Counts the steps of one stage from any thread, reporting each under a lock so the counts
+/// a [`FitProgress`] sees are monotone. Reports `0` on creation.
+pub(crate) struct StageCounter<'a> {
+    progress: &'a dyn FitProgress,
+    stage: FitStage,
+    total: usize,
+    done: Mutex<usize>,
+}
+
+impl<'a> StageCounter<'a> {
+    pub(crate) fn new(progress: &'a dyn FitProgress, stage: FitStage, total: usize) -> Self {
+        let total = total.max(1);
+        progress.report(stage, 0, total);
+        StageCounter {
+            progress,
+            stage,
+            total,
+            done: Mutex::new(0),
+        }
+    }
+
+    /// One more step done.
+    pub(crate) fn step(&self) {
+        let mut done = self.done.lock().unwrap_or_else(|e| e.into_inner());
+        *done = (*done + 1).min(self.total);
+        self.progress.report(self.stage, *done, self.total);
+    }
+
+    /// Reports the stage complete (when it has not been already).
+    pub(crate) fn finish(&self) {
+        let mut done = self.done.lock().unwrap_or_else(|e| e.into_inner());
+        if *done < self.total {
+            *done = self.total;
+            self.progress.report(self.stage, *done, self.total);
+        }
+    }
+}
 
 /// A texture PCA model.
 #[derive(Debug, Clone, PartialEq)]
@@ -177,14 +290,21 @@ impl TexturePca {
     /// `~ N(0, 1)` (as [`Self::fit`] makes them), `ridge` = the colour noise variance gives the
     /// MAP estimate. Fails on wrong lengths, non-finite values, a negative ridge, an empty
     /// mask, or singular normal equations (use `ridge > 0` then).
+    ///
+    /// To project many textures with the same mask and ridge, build the normal equations
+    /// once with [`Self::projector`] (the same numbers, bit for bit).
     pub fn project(
         &self,
         texture: &[f32],
         mask: Option<&[bool]>,
         ridge: f32,
     ) -> Result<Vec<f32>, TextureError> {
+        self.check_texture(texture)?;
+        self.projector(mask, ridge)?.project(texture)
+    }
+
+    fn check_texture(&self, texture: &[f32]) -> Result<(), TextureError> {
         let t = self.layout.num_texels();
-        let k = self.num_components;
         if texture.len() != 3 * t {
             return Err(TextureError::Invalid(format!(
                 "texture to project has {} values, expected 3 x {t}",
@@ -196,6 +316,23 @@ impl TexturePca {
                 "texture value {i} to project is not finite"
             )));
         }
+        Ok(())
+    }
+
+    /// The factorised normal equations of [`Self::project`] for one mask and ridge, to
+    /// project any number of textures (each then costs `3T x K` instead of `3T x K^2 / 2`).
+    /// Built on all cores (rayon), with every sum in the same order as a sequential loop,
+    /// so the parameters equal [`Self::project`]'s bit for bit.
+    ///
+    /// Fails on a mask of the wrong length, a negative or non-finite ridge, an empty mask,
+    /// or singular normal equations (use `ridge > 0` then).
+    pub fn projector<'a>(
+        &'a self,
+        mask: Option<&'a [bool]>,
+        ridge: f32,
+    ) -> Result<PcaProjector<'a>, TextureError> {
+        let t = self.layout.num_texels();
+        let k = self.num_components;
         if let Some(m) = mask
             && m.len() != t
         {
@@ -209,51 +346,96 @@ impl TexturePca {
                 "ridge must be finite and >= 0, got {ridge}"
             )));
         }
-        let s = f64::from(self.scale);
-        let mut ata = vec![0f64; k * k];
-        let mut atb = vec![0f64; k];
-        let mut used = 0usize;
-        let mut row = vec![0f64; k];
-        for c in 0..3 {
-            for ti in 0..t {
-                if mask.is_some_and(|m| !m[ti]) {
-                    continue;
-                }
-                used += 1;
-                let i = c * t + ti;
-                for (r, &b) in row.iter_mut().zip(&self.basis[i * k..(i + 1) * k]) {
-                    *r = s * f64::from(b);
-                }
-                let resid = f64::from(texture[i]) - s * f64::from(self.mean[i]);
-                for a in 0..k {
-                    let ra = row[a];
-                    atb[a] += ra * resid;
-                    let line = &mut ata[a * k..a * k + a + 1];
-                    for (x, &rb) in line.iter_mut().zip(&row[..=a]) {
-                        *x += ra * rb;
-                    }
-                }
-            }
-        }
+        let used = 3 * mask.map_or(t, |m| m.iter().filter(|&&b| b).count());
         if used == 0 {
             return Err(TextureError::Invalid(
                 "projection mask selects no texel".into(),
             ));
         }
+        let mut ata = self.normal_matrix(mask);
         for a in 0..k {
             ata[a * k + a] += f64::from(ridge);
             for b in 0..a {
                 ata[b * k + a] = ata[a * k + b];
             }
         }
-        let sol = cholesky_solve(&mut ata, &atb, k).ok_or_else(|| {
-            TextureError::Invalid(format!(
+        if !cholesky_factor(&mut ata, k) {
+            return Err(TextureError::Invalid(format!(
                 "the normal equations of the projection are singular ({} masked values do \
                  not determine {k} parameters); use ridge > 0",
                 used
-            ))
-        })?;
-        Ok(sol.into_iter().map(|x| x as f32).collect())
+            )));
+        }
+        Ok(PcaProjector {
+            pca: self,
+            mask,
+            factor: ata,
+        })
+    }
+
+    /// The lower triangle of `s^2 B_m^T B_m` (row-major `k x k`, the upper triangle zero).
+    ///
+    /// Each entry is a sum over the masked values in increasing order, exactly as a single
+    /// loop would add them; the work is split between threads by rows of the triangle (each
+    /// entry belongs to one thread), over blocks of basis rows that stay in cache.
+    fn normal_matrix(&self, mask: Option<&[bool]>) -> Vec<f64> {
+        const ROWS_PER_BLOCK: usize = if cfg!(test) { 5 } else { 4096 };
+        let t = self.layout.num_texels();
+        let k = self.num_components;
+        let s = f64::from(self.scale);
+        // Rows of the triangle in groups of about equal work (row `a` has `a + 1` entries).
+        let groups = (4 * rayon::current_num_threads()).clamp(1, k);
+        let work = k * (k + 1) / 2;
+        let mut bounds = vec![0usize];
+        let mut acc = 0usize;
+        for a in 0..k {
+            acc += a + 1;
+            if acc * groups >= work * bounds.len() && a + 1 < k {
+                bounds.push(a + 1);
+            }
+        }
+        bounds.push(k);
+        bounds.dedup();
+        let ranges: Vec<std::ops::Range<usize>> = bounds.windows(2).map(|w| w[0]..w[1]).collect();
+        let mut parts: Vec<Vec<f64>> = ranges
+            .iter()
+            .map(|r| vec![0f64; r.clone().map(|a| a + 1).sum()])
+            .collect();
+        // The masked value indices, in order.
+        let used: Vec<usize> = (0..3)
+            .flat_map(|c| (0..t).map(move |ti| (c, ti)))
+            .filter(|&(_, ti)| mask.is_none_or(|m| m[ti]))
+            .map(|(c, ti)| c * t + ti)
+            .collect();
+        for block in used.chunks(ROWS_PER_BLOCK) {
+            parts.par_iter_mut().zip(&ranges).for_each(|(part, range)| {
+                let end = range.end;
+                let mut row = vec![0f64; end];
+                for &i in block {
+                    for (r, &b) in row.iter_mut().zip(&self.basis[i * k..i * k + end]) {
+                        *r = s * f64::from(b);
+                    }
+                    let mut off = 0;
+                    for a in range.clone() {
+                        let ra = row[a];
+                        let line = &mut part[off..off + a + 1];
+                        for (x, &rb) in line.iter_mut().zip(&row[..=a]) {
+                            *x += ra * rb;
+                        }
+                        off += a + 1;
+                    }
+                }
+            });
+        }
+        let mut ata = vec![0f64; k * k];
+        for (part, range) in parts.iter().zip(&ranges) {
+            let mut off = 0;
+            for a in range.clone() {
+                ata[a * k..a * k + a + 1].copy_from_slice(&part[off..off + a + 1]);
+                off += a + 1;
+            }
+        }
+        ata
     }
 
     /// Fits a PCA model over sample textures (each a compact `[3T]` texture on scale 1).
@@ -269,6 +451,8 @@ impl TexturePca {
     /// Fails with fewer than 2 samples, `K` outside `1..=N-1`, or samples of the wrong
     /// length or with non-finite values.
     ///
+    /// [`Self::fit_with_progress`] without progress reports.
+    ///
     /// # Panics
     /// When the SVD does not converge (burn panics; a Gram matrix never needs more than a
     /// few sweeps).
@@ -277,6 +461,27 @@ impl TexturePca {
         samples: &[Vec<f32>],
         num_components: usize,
         device: &Device,
+    ) -> Result<(Self, PcaFitReport), TextureError> {
+        Self::fit_with_progress(layout, samples, num_components, device, &NoProgress)
+    }
+
+    /// [`Self::fit`], reporting its stages to `progress`: [`FitStage::Centre`] (blocks of the
+    /// mean, then one step per sample), [`FitStage::Gram`], [`FitStage::Eigen`] and
+    /// [`FitStage::Basis`] (the product, then blocks of rows).
+    ///
+    /// The host work (checks, mean, centring, the basis signs) runs on all cores (rayon);
+    /// the products run on `device` (flex: gemm on rayon). Every value is summed in the
+    /// same order as in a sequential loop, so the model is the same bit for bit for any
+    /// number of threads.
+    ///
+    /// # Errors and panics
+    /// As [`Self::fit`].
+    pub fn fit_with_progress(
+        layout: TextureLayout,
+        samples: &[Vec<f32>],
+        num_components: usize,
+        device: &Device,
+        progress: &dyn FitProgress,
     ) -> Result<(Self, PcaFitReport), TextureError> {
         let n = samples.len();
         let d = 3 * layout.num_texels();
@@ -292,7 +497,11 @@ impl TexturePca {
                 n - 1
             )));
         }
-        for (i, s) in samples.iter().enumerate() {
+        let bad = samples
+            .par_iter()
+            .position_first(|s| s.len() != d || s.iter().any(|x| !x.is_finite()));
+        if let Some(i) = bad {
+            let s = &samples[i];
             if s.len() != d {
                 return Err(TextureError::Invalid(format!(
                     "sample {i} has {} values, expected 3 x {} texels",
@@ -300,49 +509,57 @@ impl TexturePca {
                     layout.num_texels()
                 )));
             }
-            if s.iter().any(|x| !x.is_finite()) {
-                return Err(TextureError::Invalid(format!(
-                    "sample {i} has non-finite values"
-                )));
-            }
+            return Err(TextureError::Invalid(format!(
+                "sample {i} has non-finite values"
+            )));
         }
-        let mut mean64 = vec![0f64; d];
-        for s in samples {
-            for (m, &x) in mean64.iter_mut().zip(s) {
-                *m += f64::from(x);
-            }
-        }
-        let mean: Vec<f32> = mean64.iter().map(|&m| (m / n as f64) as f32).collect();
-        drop(mean64);
-        let mut centred = Vec::with_capacity(n * d);
-        for s in samples {
-            centred.extend(s.iter().zip(&mean).map(|(&x, &m)| x - m));
-        }
+        let centre = StageCounter::new(progress, FitStage::Centre, d.div_ceil(MEAN_BLOCK) + n);
+        // The mean: per value, the samples summed in order in f64.
+        let mut mean = vec![0f32; d];
+        mean.par_chunks_mut(MEAN_BLOCK)
+            .enumerate()
+            .for_each(|(b, out)| {
+                let start = b * MEAN_BLOCK;
+                let mut acc = vec![0f64; out.len()];
+                for s in samples {
+                    for (m, &x) in acc.iter_mut().zip(&s[start..start + out.len()]) {
+                        *m += f64::from(x);
+                    }
+                }
+                for (o, m) in out.iter_mut().zip(acc) {
+                    *o = (m / n as f64) as f32;
+                }
+                centre.step();
+            });
+        let mut centred = vec![0f32; n * d];
+        centred
+            .par_chunks_mut(d.max(1))
+            .zip(samples.par_iter())
+            .for_each(|(out, s)| {
+                for ((o, &x), &m) in out.iter_mut().zip(s).zip(&mean) {
+                    *o = x - m;
+                }
+                centre.step();
+            });
+        centre.finish();
+        let gram_stage = StageCounter::new(progress, FitStage::Gram, 1);
         let x = Tensor::<2>::from_data(TensorData::new(centred, [n, d]), device);
         let gram = x.clone().matmul(x.clone().transpose());
+        gram_stage.finish();
+        let eigen = StageCounter::new(progress, FitStage::Eigen, 1);
         let (u, s, _vt) = burn::linalg::svd::<2, 1>(gram, SVD_SWEEPS);
         let s: Vec<f32> = read(s)?;
+        eigen.finish();
+        let basis_stage = StageCounter::new(progress, FitStage::Basis, 1 + d.div_ceil(BASIS_BLOCK));
         let u_k = u.narrow(1, 0, k);
         let basis_t = x
             .transpose()
             .matmul(u_k)
             .mul_scalar(1.0 / ((n - 1) as f64).sqrt());
         let mut basis: Vec<f32> = read(basis_t.reshape([d * k]))?;
-        for c in 0..k {
-            let (mut big, mut sign) = (0f32, 1f32);
-            for r in 0..d {
-                let v = basis[r * k + c];
-                if v.abs() > big {
-                    big = v.abs();
-                    sign = v.signum();
-                }
-            }
-            if sign < 0.0 {
-                for r in 0..d {
-                    basis[r * k + c] = -basis[r * k + c];
-                }
-            }
-        }
+        basis_stage.step();
+        flip_to_positive_peaks(&mut basis, k, &basis_stage);
+        basis_stage.finish();
         let total: f64 = s.iter().map(|&x| f64::from(x.max(0.0))).sum();
         let report = PcaFitReport {
             explained_variance_ratio: s
@@ -564,16 +781,98 @@ pub(crate) fn read<const D: usize>(t: Tensor<D>) -> Result<Vec<f32>, TextureErro
         .map_err(|e| TextureError::Invalid(format!("reading a tensor back: {e:?}")))
 }
 
-/// Solves `A x = b` for a symmetric positive definite `k x k` matrix (row-major, destroyed:
-/// its lower triangle becomes the Cholesky factor). `None` when `A` is not numerically
-/// positive definite.
-fn cholesky_solve(a: &mut [f64], b: &[f64], k: usize) -> Option<Vec<f64>> {
+/// Negates the basis columns (`[d, k]` row-major) whose largest entry in magnitude (the
+/// first such row) is negative. Row blocks are scanned in parallel and combined in row order
+/// with the same strict comparison, so the chosen entry is the sequential scan's.
+fn flip_to_positive_peaks(basis: &mut [f32], k: usize, stage: &StageCounter<'_>) {
+    let peaks: Vec<Vec<(f32, f32)>> = basis
+        .par_chunks(BASIS_BLOCK * k)
+        .map(|block| {
+            let mut peaks = vec![(0f32, 1f32); k];
+            for row in block.chunks_exact(k) {
+                for (p, &v) in peaks.iter_mut().zip(row) {
+                    if v.abs() > p.0 {
+                        *p = (v.abs(), v.signum());
+                    }
+                }
+            }
+            stage.step();
+            peaks
+        })
+        .collect();
+    let mut best = vec![(0f32, 1f32); k];
+    for block in &peaks {
+        for (b, &p) in best.iter_mut().zip(block) {
+            if p.0 > b.0 {
+                *b = p;
+            }
+        }
+    }
+    let flip: Vec<bool> = best.iter().map(|&(_, sign)| sign < 0.0).collect();
+    if flip.iter().any(|&f| f) {
+        basis.par_chunks_mut(BASIS_BLOCK * k).for_each(|block| {
+            for row in block.chunks_exact_mut(k) {
+                for (v, &f) in row.iter_mut().zip(&flip) {
+                    if f {
+                        *v = -*v;
+                    }
+                }
+            }
+        });
+    }
+}
+
+/// The factorised normal equations of [`TexturePca::project`] for one mask and ridge (see
+/// [`TexturePca::projector`]).
+#[derive(Debug, Clone)]
+pub struct PcaProjector<'a> {
+    pca: &'a TexturePca,
+    mask: Option<&'a [bool]>,
+    /// Cholesky factor in the lower triangle, row-major `k x k`.
+    factor: Vec<f64>,
+}
+
+impl PcaProjector<'_> {
+    /// The least-squares parameters of `texture` (`[3T]`, in `[0, 1]`), as
+    /// [`TexturePca::project`]. Fails on a wrong length or non-finite values.
+    pub fn project(&self, texture: &[f32]) -> Result<Vec<f32>, TextureError> {
+        let pca = self.pca;
+        pca.check_texture(texture)?;
+        let t = pca.layout.num_texels();
+        let k = pca.num_components;
+        let s = f64::from(pca.scale);
+        let mut atb = vec![0f64; k];
+        let mut row = vec![0f64; k];
+        for c in 0..3 {
+            for ti in 0..t {
+                if self.mask.is_some_and(|m| !m[ti]) {
+                    continue;
+                }
+                let i = c * t + ti;
+                for (r, &b) in row.iter_mut().zip(&pca.basis[i * k..(i + 1) * k]) {
+                    *r = s * f64::from(b);
+                }
+                let resid = f64::from(texture[i]) - s * f64::from(pca.mean[i]);
+                for (x, &ra) in atb.iter_mut().zip(&row) {
+                    *x += ra * resid;
+                }
+            }
+        }
+        let sol = cholesky_solve_factored(&self.factor, &atb, k);
+        Ok(sol.into_iter().map(|x| x as f32).collect())
+    }
+}
+
+/// Factorises a symmetric positive definite `k x k` matrix (row-major) in place: its lower
+/// triangle becomes the Cholesky factor. `false` when `A` is not numerically positive
+/// definite.
+fn cholesky_factor(a: &mut [f64], k: usize) -> bool {
     let max_diag = (0..k).map(|i| a[i * k + i].abs()).fold(0.0, f64::max);
     let tol = max_diag * 1e-13;
     for j in 0..k {
         let d = a[j * k + j] - (0..j).map(|p| a[j * k + p] * a[j * k + p]).sum::<f64>();
         if d.is_nan() || d <= tol || !d.is_finite() {
-            return None;
+            return false;
         }
         let d = d.sqrt();
         a[j * k + j] = d;
@@ -582,22 +881,27 @@ fn cholesky_solve(a: &mut [f64], b: &[f64], k: usize) -> Option<Vec<f64>> {
             a[i * k + j] = v / d;
         }
     }
+    true
+}
+
+/// Solves `L L^T x = b` with `L` the lower triangle of `l` (from [`cholesky_factor`]).
+fn cholesky_solve_factored(l: &[f64], b: &[f64], k: usize) -> Vec<f64> {
     // L y = b, then L^T x = y.
     let mut y = vec![0f64; k];
     for i in 0..k {
-        y[i] = (b[i] - (0..i).map(|p| a[i * k + p] * y[p]).sum::<f64>()) / a[i * k + i];
+        y[i] = (b[i] - (0..i).map(|p| l[i * k + p] * y[p]).sum::<f64>()) / l[i * k + i];
     }
     let mut x = vec![0f64; k];
     for i in (0..k).rev() {
-        x[i] = (y[i] - (i + 1..k).map(|p| a[p * k + i] * x[p]).sum::<f64>()) / a[i * k + i];
+        x[i] = (y[i] - (i + 1..k).map(|p| l[p * k + i] * x[p]).sum::<f64>()) / l[i * k + i];
     }
-    Some(x)
+    x
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_util::{Rng, assert_close, devices, temp_dir, to_vec};
+    use crate::test_util::{Recorder, Rng, assert_close, devices, on_threads, temp_dir, to_vec};
 
     /// A 6x5 layout with 12 texels in a scattered order, and a random model with colours
     /// comfortably inside (0, 1) for parameters in [-1, 1].
@@ -932,6 +1236,213 @@ mod tests {
                 assert!(big >= 0.0, "{name}");
             }
         }
+    }
+
+    /// [`TexturePca::fit`] as it was before it ran on rayon (sequential mean, centring and
+    /// sign scan), the reference the parallel fit must equal bit for bit.
+    fn previous_fit(
+        layout: TextureLayout,
+        samples: &[Vec<f32>],
+        k: usize,
+        device: &Device,
+    ) -> (TexturePca, PcaFitReport) {
+        let n = samples.len();
+        let d = 3 * layout.num_texels();
+        let mut mean64 = vec![0f64; d];
+        for s in samples {
+            for (m, &x) in mean64.iter_mut().zip(s) {
+                *m += f64::from(x);
+            }
+        }
+        let mean: Vec<f32> = mean64.iter().map(|&m| (m / n as f64) as f32).collect();
+        let mut centred = Vec::with_capacity(n * d);
+        for s in samples {
+            centred.extend(s.iter().zip(&mean).map(|(&x, &m)| x - m));
+        }
+        let x = Tensor::<2>::from_data(TensorData::new(centred, [n, d]), device);
+        let gram = x.clone().matmul(x.clone().transpose());
+        let (u, s, _vt) = burn::linalg::svd::<2, 1>(gram, SVD_SWEEPS);
+        let s: Vec<f32> = read(s).unwrap();
+        let basis_t = x
+            .transpose()
+            .matmul(u.narrow(1, 0, k))
+            .mul_scalar(1.0 / ((n - 1) as f64).sqrt());
+        let mut basis: Vec<f32> = read(basis_t.reshape([d * k])).unwrap();
+        for c in 0..k {
+            let (mut big, mut sign) = (0f32, 1f32);
+            for r in 0..d {
+                let v = basis[r * k + c];
+                if v.abs() > big {
+                    big = v.abs();
+                    sign = v.signum();
+                }
+            }
+            if sign < 0.0 {
+                for r in 0..d {
+                    basis[r * k + c] = -basis[r * k + c];
+                }
+            }
+        }
+        let total: f64 = s.iter().map(|&x| f64::from(x.max(0.0))).sum();
+        let report = PcaFitReport {
+            explained_variance_ratio: s
+                .iter()
+                .take(k)
+                .map(|&x| (f64::from(x.max(0.0)) / total) as f32)
+                .collect(),
+            total_variance: (total / (n - 1) as f64) as f32,
+        };
+        (
+            TexturePca::new(layout, mean, basis, k, 1.0).unwrap(),
+            report,
+        )
+    }
+
+    /// [`TexturePca::project`] as it was before the projector (one sequential loop).
+    fn previous_project(
+        m: &TexturePca,
+        texture: &[f32],
+        mask: Option<&[bool]>,
+        ridge: f32,
+    ) -> Vec<f32> {
+        let t = m.layout.num_texels();
+        let k = m.num_components;
+        let s = f64::from(m.scale);
+        let mut ata = vec![0f64; k * k];
+        let mut atb = vec![0f64; k];
+        let mut row = vec![0f64; k];
+        for c in 0..3 {
+            for ti in 0..t {
+                if mask.is_some_and(|m| !m[ti]) {
+                    continue;
+                }
+                let i = c * t + ti;
+                for (r, &b) in row.iter_mut().zip(&m.basis[i * k..(i + 1) * k]) {
+                    *r = s * f64::from(b);
+                }
+                let resid = f64::from(texture[i]) - s * f64::from(m.mean[i]);
+                for a in 0..k {
+                    let ra = row[a];
+                    atb[a] += ra * resid;
+                    let line = &mut ata[a * k..a * k + a + 1];
+                    for (x, &rb) in line.iter_mut().zip(&row[..=a]) {
+                        *x += ra * rb;
+                    }
+                }
+            }
+        }
+        for a in 0..k {
+            ata[a * k + a] += f64::from(ridge);
+            for b in 0..a {
+                ata[b * k + a] = ata[a * k + b];
+            }
+        }
+        assert!(cholesky_factor(&mut ata, k));
+        let sol = cholesky_solve_factored(&ata, &atb, k);
+        sol.into_iter().map(|x| x as f32).collect()
+    }
+
+    /// Low-rank samples plus noise (so every component is fitted to something).
+    fn noisy_samples(n: usize, seed: u64) -> (TextureLayout, Vec<Vec<f32>>) {
+        let (layout, mut samples, _) = low_rank_samples(n, seed);
+        let mut r = Rng::new(seed + 7);
+        for s in &mut samples {
+            for x in s.iter_mut() {
+                *x += r.uniform(-0.02, 0.02);
+            }
+        }
+        (layout, samples)
+    }
+
+    #[test]
+    fn parallel_fit_equals_the_sequential_fit_bit_for_bit() {
+        let (layout, samples) = noisy_samples(11, 21);
+        for (name, device) in devices() {
+            let want = previous_fit(layout.clone(), &samples, 6, &device);
+            for threads in [1, 2, 3, 8] {
+                let got = on_threads(threads, || {
+                    TexturePca::fit(layout.clone(), &samples, 6, &device).unwrap()
+                });
+                assert_eq!(got, want, "{name}, {threads} threads");
+            }
+        }
+    }
+
+    #[test]
+    fn fit_reports_monotone_progress_to_each_total() {
+        let (layout, samples) = noisy_samples(9, 22);
+        let d = samples[0].len();
+        for threads in [1, 3] {
+            let rec = Recorder::default();
+            let (m, _) = on_threads(threads, || {
+                TexturePca::fit_with_progress(layout.clone(), &samples, 4, &Device::flex(), &rec)
+                    .unwrap()
+            });
+            let totals = rec.check(&[
+                FitStage::Centre,
+                FitStage::Gram,
+                FitStage::Eigen,
+                FitStage::Basis,
+            ]);
+            assert_eq!(
+                totals,
+                [
+                    d.div_ceil(MEAN_BLOCK) + 9,
+                    1,
+                    1,
+                    1 + d.div_ceil(BASIS_BLOCK)
+                ]
+            );
+            // Every block and sample is one step: no count is skipped.
+            let calls = rec.0.lock().unwrap();
+            let centre = calls.iter().filter(|c| c.0 == FitStage::Centre).count();
+            assert_eq!(centre, totals[0] + 1);
+            assert_eq!(
+                m,
+                TexturePca::fit(layout.clone(), &samples, 4, &Device::flex())
+                    .unwrap()
+                    .0
+            );
+        }
+        // A closure is a `FitProgress` too.
+        let last = Mutex::new(None);
+        let f = |stage: FitStage, done: usize, total: usize| {
+            *last.lock().unwrap() = Some((stage, done, total));
+        };
+        TexturePca::fit_with_progress(layout, &samples, 2, &Device::flex(), &f).unwrap();
+        let (stage, done, total) = last.lock().unwrap().unwrap();
+        assert_eq!((stage, done), (FitStage::Basis, total));
+        assert_eq!(stage.label(), "basis");
+    }
+
+    #[test]
+    fn projector_equals_the_sequential_projection_bit_for_bit() {
+        let (layout, samples) = noisy_samples(14, 23);
+        let (m, _) = TexturePca::fit(layout, &samples, 9, &Device::flex()).unwrap();
+        let half: Vec<bool> = (0..12).map(|t| t % 3 != 1).collect();
+        for (mask, ridge) in [(None, 1e-4), (Some(&half[..]), 1e-3), (None, 0.0)] {
+            let want: Vec<Vec<f32>> = samples
+                .iter()
+                .map(|s| previous_project(&m, s, mask, ridge))
+                .collect();
+            for threads in [1, 2, 5] {
+                let got: Vec<Vec<f32>> = on_threads(threads, || {
+                    let p = m.projector(mask, ridge).unwrap();
+                    samples.iter().map(|s| p.project(s).unwrap()).collect()
+                });
+                assert_eq!(got, want, "{threads} threads, ridge {ridge}");
+                let one: Vec<Vec<f32>> = on_threads(threads, || {
+                    samples
+                        .iter()
+                        .map(|s| m.project(s, mask, ridge).unwrap())
+                        .collect()
+                });
+                assert_eq!(one, want);
+            }
+        }
+        let p = m.projector(None, 0.1).unwrap();
+        assert!(p.project(&[0.5; 35]).is_err());
+        assert!(p.project(&[f32::NAN; 36]).is_err());
     }
 
     #[test]

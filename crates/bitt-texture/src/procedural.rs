@@ -47,6 +47,9 @@ pub mod noise;
 #[cfg(test)]
 mod tests;
 
-pub use fit::{EvalReport, ProceduralTextureConfig, procedural_texture_pca};
+pub use fit::{
+    EvalReport, ProceduralTextureConfig, procedural_texture_model, procedural_texture_pca,
+    procedural_texture_pca_with_progress,
+};
 pub use generate::generate_texture;
 pub use identity::SkinIdentity;

@@ -4,9 +4,12 @@
 use bitt_mesh::glam::DVec3;
 use bitt_mesh::{HandPair, Side, TwoHandScene};
 use bitt_render::scene::{
-    Camera, PointLight, RenderSettings, Scene, SceneRender, TexelSurface, TexturedMesh, render,
+    Camera, DepthRange, PointLight, RenderSettings, Scene, SceneGeometry, SceneRender,
+    TexelSurface, TexturedMesh,
 };
 use bitt_texture::{LayoutGather, TextureLayout};
+use std::sync::{Arc, Mutex};
+
 use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::BittError;
@@ -87,6 +90,12 @@ impl HandAssets {
 }
 
 /// One view's fixed geometry: both hands posed in the camera frame, and the camera.
+///
+/// The vertices are constants (no gradient), so everything a render needs from them (the
+/// raster, per-pixel positions, normals and texel footprints, silhouette pairs) is computed
+/// once per depth range, antialiasing switch and texture size, on the first render, and
+/// reused by every later render of the view and its clones: a training step only samples
+/// textures, shades and blends.
 #[derive(Debug, Clone)]
 pub struct ViewGeometry {
     /// The render camera (camera-frame vertices, so identity extrinsics).
@@ -97,7 +106,19 @@ pub struct ViewGeometry {
     pub vertices_host: [Vec<DVec3>; 2],
     /// The same as `[V, 3]` tensors.
     pub vertices: [Tensor<2>; 2],
+    /// The render geometry made so far (see the type's docs).
+    cache: GeometryCache,
 }
+
+/// What identifies a [`SceneGeometry`] of one view: depth range, antialiasing, texture side.
+type CacheKey = (DepthRange, bool, usize);
+
+/// The [`SceneGeometry`]s made so far, with their keys.
+type CacheEntries = Vec<(CacheKey, Arc<SceneGeometry>)>;
+
+/// The [`SceneGeometry`]s of one view, shared by its clones.
+#[derive(Debug, Clone, Default)]
+struct GeometryCache(Arc<Mutex<CacheEntries>>);
 
 impl ViewGeometry {
     /// Poses both hands of `scene` (both must be present) on `device`.
@@ -115,22 +136,61 @@ impl ViewGeometry {
             host.push(hand.vertices.clone());
         }
         let host: [Vec<DVec3>; 2] = host.try_into().expect("two hands");
-        let vertices = [
-            vertex_tensor(&host[0], device),
-            vertex_tensor(&host[1], device),
-        ];
         let c = &scene.camera;
         let camera = Camera::Pinhole(bitt_mesh::PinholeCamera {
             rotation: bitt_mesh::glam::DMat3::IDENTITY,
             translation: DVec3::ZERO,
             ..*c
         });
-        Ok(ViewGeometry {
+        Ok(Self::from_vertices(camera, *c, host, device))
+    }
+
+    /// A view of camera-frame vertices (left, right) seen by `camera` (identity
+    /// extrinsics); `scene_camera` is the scene's camera with its extrinsics.
+    pub fn from_vertices(
+        camera: Camera,
+        scene_camera: bitt_mesh::PinholeCamera,
+        vertices_host: [Vec<DVec3>; 2],
+        device: &Device,
+    ) -> Self {
+        let vertices = [
+            vertex_tensor(&vertices_host[0], device),
+            vertex_tensor(&vertices_host[1], device),
+        ];
+        ViewGeometry {
             camera,
-            scene_camera: *c,
-            vertices_host: host,
+            scene_camera,
+            vertices_host,
             vertices,
-        })
+            cache: GeometryCache::default(),
+        }
+    }
+
+    /// The render geometry of this view for `settings` and square textures of side
+    /// `texture_size`, made on first use and then reused.
+    ///
+    /// # Errors
+    /// As [`SceneGeometry::new`].
+    pub fn scene_geometry(
+        &self,
+        assets: &HandAssets,
+        settings: &RenderSettings,
+        texture_size: usize,
+    ) -> Result<Arc<SceneGeometry>, BittError> {
+        let key = (settings.depth, settings.antialias, texture_size);
+        let mut cache = self.cache.0.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, g)) = cache.iter().find(|(k, _)| *k == key) {
+            return Ok(g.clone());
+        }
+        let g = Arc::new(SceneGeometry::new(
+            &assets.scene,
+            &self.vertices,
+            &self.camera,
+            settings,
+            &[[texture_size; 2]; 2],
+        )?);
+        cache.push((key, g.clone()));
+        Ok(g)
     }
 
     /// Image side lengths `[H, W]`.
@@ -147,19 +207,42 @@ impl ViewGeometry {
         light: &PointLight,
         settings: &RenderSettings,
     ) -> Result<SceneRender, BittError> {
+        let g = self.scene_geometry(assets, settings, assets.texture_size)?;
+        Ok(SceneRender {
+            image: self.shade(&g, gather, textures, light, settings)?,
+            masks: g.masks.clone(),
+            raster: g.raster.clone(),
+            clip: g.clip.clone(),
+        })
+    }
+
+    /// The image of [`ViewGeometry::render`] alone, `[3, H, W]` (nothing else is copied).
+    pub fn render_image(
+        &self,
+        assets: &HandAssets,
+        gather: &LayoutGather,
+        textures: [Tensor<2>; 2],
+        light: &PointLight,
+        settings: &RenderSettings,
+    ) -> Result<Tensor<3>, BittError> {
+        let g = self.scene_geometry(assets, settings, assets.texture_size)?;
+        self.shade(&g, gather, textures, light, settings)
+    }
+
+    fn shade(
+        &self,
+        geometry: &SceneGeometry,
+        gather: &LayoutGather,
+        textures: [Tensor<2>; 2],
+        light: &PointLight,
+        settings: &RenderSettings,
+    ) -> Result<Tensor<3>, BittError> {
         let [l, r] = textures;
         let images = [
             gather.compact_to_image(l, [0.0; 3]),
             gather.compact_to_image(r, [0.0; 3]),
         ];
-        Ok(render(
-            &assets.scene,
-            &self.vertices,
-            &images,
-            &self.camera,
-            light,
-            settings,
-        )?)
+        Ok(geometry.shade(&images, light, &settings.material, settings.background)?)
     }
 }
 

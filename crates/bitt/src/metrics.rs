@@ -348,6 +348,125 @@ pub fn texel_l1(a: &[f32], b: &[f32], select: &[bool]) -> Option<f64> {
     (n > 0).then(|| sum / n as f64)
 }
 
+/// Texture-space L1 against the ground truth, per texel class (both hands pooled).
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TexelErrors {
+    /// Texels visible in the input on their own hand.
+    pub visible: Option<f64>,
+    /// Invisible on their own hand, visible on the other (usable through symmetry).
+    pub symmetric: Option<f64>,
+    /// Invisible on both hands.
+    pub invisible: Option<f64>,
+    /// Every texel invisible on its own hand (`symmetric` and `invisible` together).
+    pub not_visible: Option<f64>,
+}
+
+/// A texture's errors against the ground truth: raw, and after one gain per colour channel
+/// (docs/evaluation.md, "Scale-invariant texture error").
+///
+/// The split of an image into albedo and light is ambiguous up to a scale per channel: a
+/// texture twice as bright under a light half as strong renders the same image. The raw
+/// texel L1 punishes that scale as if it were an error of the texture. The gain-fitted error
+/// first fits, per channel `c`, the least-squares gain `g_c = sum x y / sum x^2` of the
+/// texture `x` to the ground truth `y` over the texels visible in the input (both hands, the
+/// only texels the photo can pin down), applies it to every texel, then takes the L1 per
+/// class. It is the headline texture number; the raw one is kept beside it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TextureErrors {
+    /// Errors after the per-channel gain (the headline).
+    pub gain_fitted: TexelErrors,
+    /// Raw errors.
+    pub raw: TexelErrors,
+    /// The fitted gains (R, G, B); `None` when no texel is visible or the texture is black
+    /// there.
+    pub gains: Option<[f64; 3]>,
+}
+
+/// The least-squares gain per channel of `texture` to `gt` over the selected texels (both
+/// `[3, T]`): `g_c = sum x y / sum x^2`. `None` when no texel is selected or the texture is
+/// zero on all of them in some channel.
+pub fn channel_gains(texture: &[f32], gt: &[f32], select: &[bool]) -> Option<[f64; 3]> {
+    let t = select.len();
+    if texture.len() != 3 * t || gt.len() != 3 * t {
+        return None;
+    }
+    let mut gains = [0.0; 3];
+    for (ch, gain) in gains.iter_mut().enumerate() {
+        let (mut xy, mut xx) = (0.0f64, 0.0f64);
+        for (k, _) in select.iter().enumerate().filter(|(_, s)| **s) {
+            let (x, y) = (f64::from(texture[ch * t + k]), f64::from(gt[ch * t + k]));
+            xy += x * y;
+            xx += x * x;
+        }
+        if xx <= 0.0 || !(xy / xx).is_finite() {
+            return None;
+        }
+        *gain = xy / xx;
+    }
+    Some(gains)
+}
+
+/// Raw and gain-fitted texture errors of textures `[3, T]` (left, right) against the ground
+/// truth, with each hand's texels visible in the input (see [`TextureErrors`]). Classes: a
+/// texel of one hand is `visible` if that hand shows it, `symmetric` if only the other hand
+/// shows the same texel (usable through the layout's left/right symmetry, paper Sec. 3.3),
+/// `invisible` if neither does. Mismatched lengths give all `None`.
+pub fn texture_errors(
+    textures: &[Vec<f32>; 2],
+    gt: &[Vec<f32>; 2],
+    visible: &[Vec<bool>; 2],
+) -> TextureErrors {
+    let t = visible[0].len();
+    if textures.iter().chain(gt).any(|x| x.len() != 3 * t) || visible[1].len() != t {
+        return TextureErrors::default();
+    }
+    // Both hands as one [3, 2T] texture.
+    let cat = |a: &[Vec<f32>; 2]| -> Vec<f32> {
+        (0..3)
+            .flat_map(|ch| {
+                a[0][ch * t..(ch + 1) * t]
+                    .iter()
+                    .chain(&a[1][ch * t..(ch + 1) * t])
+                    .copied()
+            })
+            .collect()
+    };
+    let (x, g) = (cat(textures), cat(gt));
+    let class = |f: &dyn Fn(bool, bool) -> bool| -> Vec<bool> {
+        (0..2)
+            .flat_map(|h| (0..t).map(move |i| (h, i)))
+            .map(|(h, i)| f(visible[h][i], visible[1 - h][i]))
+            .collect()
+    };
+    let classes = [
+        class(&|own, _| own),
+        class(&|own, other| !own && other),
+        class(&|own, other| !own && !other),
+        class(&|own, _| !own),
+    ];
+    let errors = |x: &[f32]| TexelErrors {
+        visible: texel_l1(x, &g, &classes[0]),
+        symmetric: texel_l1(x, &g, &classes[1]),
+        invisible: texel_l1(x, &g, &classes[2]),
+        not_visible: texel_l1(x, &g, &classes[3]),
+    };
+    let gains = channel_gains(&x, &g, &classes[0]);
+    let gain_fitted = gains.map_or_else(TexelErrors::default, |gains| {
+        let n = 2 * t;
+        let scaled: Vec<f32> = x
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| (f64::from(v) * gains[i / n]) as f32)
+            .collect();
+        errors(&scaled)
+    });
+    TextureErrors {
+        gain_fitted,
+        raw: errors(&x),
+        gains,
+    }
+}
+
 /// Intersection over union of two masks (values > 0.5 are inside); 1 when both are empty.
 pub fn mask_iou(a: &[f32], b: &[f32]) -> f64 {
     let (mut inter, mut union) = (0usize, 0usize);
@@ -424,6 +543,55 @@ mod tests {
         let m = image_metrics(&a, &b, [1, 176, 176]);
         let ms = m.ms_ssim.unwrap();
         assert!(ms > 0.0 && ms < 1.0, "{ms}");
+    }
+
+    #[test]
+    fn a_rescaled_texture_has_no_gain_fitted_error() {
+        // 4 texels per hand; left sees 0, 1; right sees 0. Ground truth per channel.
+        let gt_hand = |s: f32| -> Vec<f32> {
+            (0..3)
+                .flat_map(|ch| (0..4).map(move |k| s * (0.1 + 0.05 * k as f32 + 0.2 * ch as f32)))
+                .collect()
+        };
+        let gt = [gt_hand(1.0), gt_hand(0.9)];
+        // The texture is the truth under other per-channel gains.
+        let g = [0.5f32, 2.0, 1.25];
+        let scale =
+            |v: &[f32]| -> Vec<f32> { v.iter().enumerate().map(|(i, &x)| x / g[i / 4]).collect() };
+        let tex = [scale(&gt[0]), scale(&gt[1])];
+        let visible = [
+            vec![true, true, false, false],
+            vec![true, false, false, false],
+        ];
+        let e = texture_errors(&tex, &gt, &visible);
+        let gains = e.gains.expect("gains");
+        for ch in 0..3 {
+            assert!((gains[ch] - f64::from(g[ch])).abs() < 1e-5, "{gains:?}");
+        }
+        for v in [
+            e.gain_fitted.visible,
+            e.gain_fitted.symmetric,
+            e.gain_fitted.invisible,
+            e.gain_fitted.not_visible,
+        ] {
+            assert!(v.expect("value") < 1e-6);
+        }
+        assert!(e.raw.not_visible.expect("raw") > 0.05);
+        // Classes: left texel 2, 3 and right 2, 3 are hidden on both; right 1 is symmetric.
+        let raw_sym = e.raw.symmetric.expect("symmetric");
+        let want: f64 = (0..3)
+            .map(|ch| f64::from((gt[1][ch * 4 + 1] - tex[1][ch * 4 + 1]).abs()))
+            .sum::<f64>()
+            / 3.0;
+        assert!((raw_sym - want).abs() < 1e-6);
+        // No visible texel: no gain, no gain-fitted error, raw errors still there.
+        let none = [vec![false; 4], vec![false; 4]];
+        let e = texture_errors(&tex, &gt, &none);
+        assert_eq!(e.gains, None);
+        assert_eq!(e.gain_fitted, TexelErrors::default());
+        assert!(e.raw.invisible.is_some());
+        // A black texture has no gain.
+        assert_eq!(channel_gains(&[0.0; 3], &[0.5; 3], &[true]), None);
     }
 
     #[test]

@@ -224,14 +224,14 @@ pub fn forward(
     let compact = |x: &Tensor<3>| x.clone().reshape([3, t]);
     let render_with =
         |textures: [Tensor<3>; 2], light: &PointLight| -> Result<Tensor<4>, BittError> {
-            let r = view.geometry.render(
+            let image = view.geometry.render_image(
                 assets,
                 gather,
                 [compact(&textures[0]), compact(&textures[1])],
                 light,
                 settings,
             )?;
-            Ok(r.image.reshape([1, 3, h, w]))
+            Ok(image.reshape([1, 3, h, w]))
         };
     let coarse_image = render_with(coarse.clone(), &light)?;
     let mut albedo_batch = vec![view.hand_image.clone()];

@@ -7,7 +7,7 @@ use bitt_mesh::glam::{DMat3, DVec3};
 use bitt_mesh::{PinholeCamera, TwoHandScene, procedural_pair};
 use bitt_render::scene::LightValues;
 use bitt_synth::SynthScene;
-use bitt_texture::{TexturePca, procedural_texture_pca};
+use bitt_texture::{FitProgress, NoProgress, TexturePca, procedural_texture_model};
 use burn::tensor::Device;
 
 use crate::BittError;
@@ -124,11 +124,22 @@ fn read_refinement(dir: &Path) -> Result<Option<serde_json::Value>, BittError> {
 }
 
 /// The texture PCA of `config.texture`, read from `cache_dir` when fitted before, else fitted
-/// (seconds to a minute) and cached there.
+/// (seconds at `quick`, minutes at `paper`) and cached there.
 pub fn texture_prior(
     config: &TrainConfig,
     cache_dir: Option<&Path>,
     device: &Device,
+) -> Result<TexturePca, BittError> {
+    texture_prior_with_progress(config, cache_dir, device, &NoProgress)
+}
+
+/// [`texture_prior`], reporting the fit's stages to `progress` (nothing is reported when the
+/// cache has the model).
+pub fn texture_prior_with_progress(
+    config: &TrainConfig,
+    cache_dir: Option<&Path>,
+    device: &Device,
+    progress: &dyn FitProgress,
 ) -> Result<TexturePca, BittError> {
     let key = {
         let text = serde_json::to_string(&config.texture).unwrap_or_default();
@@ -149,7 +160,8 @@ pub fn texture_prior(
             }
         }
     }
-    let (pca, _, _) = procedural_texture_pca(&config.texture, device)?;
+    // The model alone: the held-out identities only serve `bitt texture`'s evaluation.
+    let (pca, _) = procedural_texture_model(&config.texture, device, progress)?;
     if let Some(dir) = cache_dir {
         std::fs::create_dir_all(dir).map_err(|e| BittError::io(dir, e))?;
         pca.save_safetensors(&dir.join(key))?;
@@ -649,11 +661,31 @@ fn write_report(
         html.push_str("</table>");
         let f = |v: Option<f64>| v.map_or("n/a".into(), |v| format!("{v:.4}"));
         if let Some(t) = &s.texture {
+            let (fine, coarse) = (&t.fine.gain_fitted, &t.coarse.gain_fitted);
+            let (fine_raw, coarse_raw) = (&t.fine.raw, &t.coarse.raw);
             html.push_str(&format!(
-            "<p>Texture L1 against the ground-truth albedo: texels visible in the input: fine {} / coarse {}; invisible: fine {} / coarse {} (of those, visible on the other hand: fine {} / coarse {}; invisible on both hands: fine {} / coarse {}).</p>",
-            f(t.fine_visible), f(t.coarse_visible), f(t.fine_invisible), f(t.coarse_invisible),
-            f(t.fine_symmetric), f(t.coarse_symmetric), f(t.fine_hidden_both), f(t.coarse_hidden_both)
-        ));
+                "<p>Texture L1 against the ground-truth albedo, after one gain per colour channel \
+                 fitted on the texels visible in the input (raw L1 in brackets): texels visible in \
+                 the input: fine {} ({}) / coarse {} ({}); invisible: fine {} ({}) / coarse {} ({}); \
+                 of those, visible on the other hand: fine {} ({}) / coarse {} ({}); invisible on \
+                 both hands: fine {} ({}) / coarse {} ({}).</p>",
+                f(fine.visible),
+                f(fine_raw.visible),
+                f(coarse.visible),
+                f(coarse_raw.visible),
+                f(fine.not_visible),
+                f(fine_raw.not_visible),
+                f(coarse.not_visible),
+                f(coarse_raw.not_visible),
+                f(fine.symmetric),
+                f(fine_raw.symmetric),
+                f(coarse.symmetric),
+                f(coarse_raw.symmetric),
+                f(fine.invisible),
+                f(fine_raw.invisible),
+                f(coarse.invisible),
+                f(coarse_raw.invisible),
+            ));
         }
     }
     if let Some(r) = refinement {
@@ -905,18 +937,9 @@ pub fn orbit_geometry(
             .map(|p| turn * (p - center) + center)
             .collect::<Vec<_>>()
     });
-    let vertices = [
-        crate::assets::vertex_tensor(&host[0], &device),
-        crate::assets::vertex_tensor(&host[1], &device),
-    ];
     let camera = orbit_camera(&geometry.scene_camera, center, yaw, pitch);
     (
-        ViewGeometry {
-            camera: geometry.camera,
-            scene_camera: camera,
-            vertices_host: host,
-            vertices,
-        },
+        ViewGeometry::from_vertices(geometry.camera, camera, host, &device),
         camera,
     )
 }

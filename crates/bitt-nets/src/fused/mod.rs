@@ -14,9 +14,15 @@
 //! autodiff) in `f32`; on every other backend [`conv_norm_silu`] returns `None` and the caller
 //! composes burn operations, which compute the same function. Tests compare both, values and
 //! gradients, and the kernels against naive loops and finite differences.
+//!
+//! [`conv2d`] is the same mechanism for the image networks (albedo U-Net, light and HTML
+//! encoders): `act(InstanceNorm(conv2d(x) + bias))` as one operation, tiled im2col + GEMM
+//! and row passes in [`kernels2d`].
 
+pub(crate) mod conv2d;
 mod gemm;
 pub(crate) mod kernels;
+pub(crate) mod kernels2d;
 
 use std::sync::Arc;
 

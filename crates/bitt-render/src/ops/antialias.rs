@@ -24,7 +24,7 @@
 //! Screen coordinates here are pixels with pixel `(col, row)`'s centre at
 //! `(col + 1/2, row + 1/2)` = `((x/w + 1) W / 2, (y/w + 1) H / 2)`.
 
-use burn::tensor::{IndexingUpdateOp, Tensor, activation::relu};
+use burn::tensor::{IndexingUpdateOp, Int, Tensor, activation::relu};
 
 use super::{Raster, Topology, check_shape, float_tensor, index_tensor};
 use crate::error::RenderError;
@@ -160,77 +160,148 @@ pub fn antialias(
     clip: Tensor<2>,
     topology: &Topology,
 ) -> Result<Tensor<3>, RenderError> {
-    let [c, h, w] = color.dims();
-    check_shape(
-        "color",
-        [c, h, w],
-        [None, Some(raster.height()), Some(raster.width())],
-        || {
-            format!(
-                "[C, {}, {}] (the raster's size)",
-                raster.height(),
-                raster.width()
-            )
-        },
-    )?;
-    let v = topology.num_vertices();
-    check_shape("clip", clip.dims(), [Some(v), Some(4)], || {
-        format!("[V, 4] with V = {v}")
-    })?;
-    let pairs = silhouette_pairs(raster, topology)?;
-    if pairs.is_empty() {
-        return Ok(color);
-    }
-    let device = color.device();
-    let k = pairs.len();
-    let idx =
-        |f: &dyn Fn(usize) -> u32| index_tensor((0..k).map(|i| i64::from(f(i))).collect(), &device);
-    let a = clip.clone().select(0, idx(&|i| pairs.edges[i][0]));
-    let b = clip.select(0, idx(&|i| pairs.edges[i][1]));
-    let screen = |t: Tensor<2>| {
-        let x = t.clone().slice([0..k, 0..1]);
-        let y = t.clone().slice([0..k, 1..2]);
-        let cw = t.slice([0..k, 3..4]);
-        (
-            (x / cw.clone() + 1.0) * (w as f64 / 2.0),
-            (y / cw + 1.0) * (h as f64 / 2.0),
-        )
-    };
-    let (ax, ay) = screen(a);
-    let (bx, by) = screen(b);
-    let centres = |pixels: &[u32]| {
-        let xs = pixels
-            .iter()
-            .map(|&p| (p as usize % w) as f32 + 0.5)
-            .collect();
-        let ys = pixels
-            .iter()
-            .map(|&p| (p as usize / w) as f32 + 0.5)
-            .collect();
-        (
-            float_tensor(xs, [k, 1], &device),
-            float_tensor(ys, [k, 1], &device),
-        )
-    };
-    let (px, py) = centres(&pairs.front);
-    let (qx, qy) = centres(&pairs.back);
-    let (dx, dy) = (bx - ax.clone(), by - ay.clone());
-    let side =
-        |x: Tensor<2>, y: Tensor<2>| dx.clone() * (y - ay.clone()) - dy.clone() * (x - ax.clone());
-    let fp = side(px, py);
-    let fq = side(qx, qy);
-    let t = (fp.clone() / (fp - fq)).clamp(0.0, 1.0).reshape([1, k]);
-    let to_back = relu(t.clone() - 0.5);
-    let to_front = relu(t.neg() + 0.5);
+    AntialiasPlan::new(raster, clip, topology)?.apply(color)
+}
 
-    let front = index_tensor(pairs.front.iter().map(|&p| i64::from(p)).collect(), &device);
-    let back = index_tensor(pairs.back.iter().map(|&p| i64::from(p)).collect(), &device);
-    let flat = color.reshape([c, h * w]);
-    let c_front = flat.clone().select(1, front.clone());
-    let c_back = flat.clone().select(1, back.clone());
-    let diff = c_front - c_back;
-    let out = flat
-        .select_assign(1, back, diff.clone() * to_back, IndexingUpdateOp::Add)
-        .select_assign(1, front, diff.neg() * to_front, IndexingUpdateOp::Add);
-    Ok(out.reshape([c, h, w]))
+/// The part of [`antialias`] that depends only on the geometry: the silhouette pixel pairs
+/// and how far each pair's edge reaches (`t`, a tensor expression of the clip positions, so
+/// the plan keeps their gradient). Made once for a fixed geometry, it antialiases every
+/// image rendered from it.
+#[derive(Debug, Clone)]
+pub struct AntialiasPlan {
+    height: usize,
+    width: usize,
+    pairs: usize,
+    front: Tensor<1, Int>,
+    back: Tensor<1, Int>,
+    /// `[1, K]`: how much of the front colour each back pixel takes (`relu(t - 1/2)`).
+    to_back: Tensor<2>,
+    /// `[1, K]`: how much of the back colour each front pixel takes (`relu(1/2 - t)`).
+    to_front: Tensor<2>,
+}
+
+impl AntialiasPlan {
+    /// Finds the silhouette pairs of `raster` and their blend weights.
+    ///
+    /// `clip` must be the tensor `raster` was made from (the gradient flows into it).
+    ///
+    /// # Shapes
+    /// clip `[V, 4]`
+    ///
+    /// # Errors
+    /// When `clip` or the raster does not match `topology`.
+    pub fn new(raster: &Raster, clip: Tensor<2>, topology: &Topology) -> Result<Self, RenderError> {
+        let v = topology.num_vertices();
+        check_shape("clip", clip.dims(), [Some(v), Some(4)], || {
+            format!("[V, 4] with V = {v}")
+        })?;
+        let pairs = silhouette_pairs(raster, topology)?;
+        let (h, w) = (raster.height(), raster.width());
+        let device = clip.device();
+        let k = pairs.len();
+        let front = index_tensor(pairs.front.iter().map(|&p| i64::from(p)).collect(), &device);
+        let back = index_tensor(pairs.back.iter().map(|&p| i64::from(p)).collect(), &device);
+        if k == 0 {
+            return Ok(Self {
+                height: h,
+                width: w,
+                pairs: 0,
+                front,
+                back,
+                to_back: Tensor::zeros([1, 0], &device),
+                to_front: Tensor::zeros([1, 0], &device),
+            });
+        }
+        let idx = |f: &dyn Fn(usize) -> u32| {
+            index_tensor((0..k).map(|i| i64::from(f(i))).collect(), &device)
+        };
+        let a = clip.clone().select(0, idx(&|i| pairs.edges[i][0]));
+        let b = clip.select(0, idx(&|i| pairs.edges[i][1]));
+        let screen = |t: Tensor<2>| {
+            let x = t.clone().slice([0..k, 0..1]);
+            let y = t.clone().slice([0..k, 1..2]);
+            let cw = t.slice([0..k, 3..4]);
+            (
+                (x / cw.clone() + 1.0) * (w as f64 / 2.0),
+                (y / cw + 1.0) * (h as f64 / 2.0),
+            )
+        };
+        let (ax, ay) = screen(a);
+        let (bx, by) = screen(b);
+        let centres = |pixels: &[u32]| {
+            let xs = pixels
+                .iter()
+                .map(|&p| (p as usize % w) as f32 + 0.5)
+                .collect();
+            let ys = pixels
+                .iter()
+                .map(|&p| (p as usize / w) as f32 + 0.5)
+                .collect();
+            (
+                float_tensor(xs, [k, 1], &device),
+                float_tensor(ys, [k, 1], &device),
+            )
+        };
+        let (px, py) = centres(&pairs.front);
+        let (qx, qy) = centres(&pairs.back);
+        let (dx, dy) = (bx - ax.clone(), by - ay.clone());
+        let side = |x: Tensor<2>, y: Tensor<2>| {
+            dx.clone() * (y - ay.clone()) - dy.clone() * (x - ax.clone())
+        };
+        let fp = side(px, py);
+        let fq = side(qx, qy);
+        let t = (fp.clone() / (fp - fq)).clamp(0.0, 1.0).reshape([1, k]);
+        Ok(Self {
+            height: h,
+            width: w,
+            pairs: k,
+            front,
+            back,
+            to_back: relu(t.clone() - 0.5),
+            to_front: relu(t.neg() + 0.5),
+        })
+    }
+
+    /// Number of silhouette pixel pairs.
+    pub fn num_pairs(&self) -> usize {
+        self.pairs
+    }
+
+    /// Antialiases `color`, an image of the plan's size.
+    ///
+    /// # Shapes
+    /// color `[C, H, W]` -> `[C, H, W]`
+    ///
+    /// # Errors
+    /// An image of another size than the raster's.
+    pub fn apply(&self, color: Tensor<3>) -> Result<Tensor<3>, RenderError> {
+        let [c, h, w] = color.dims();
+        check_shape(
+            "color",
+            [c, h, w],
+            [None, Some(self.height), Some(self.width)],
+            || format!("[C, {}, {}] (the raster's size)", self.height, self.width),
+        )?;
+        if self.pairs == 0 {
+            return Ok(color);
+        }
+        let flat = color.reshape([c, h * w]);
+        let c_front = flat.clone().select(1, self.front.clone());
+        let c_back = flat.clone().select(1, self.back.clone());
+        let diff = c_front - c_back;
+        let out = flat
+            .select_assign(
+                1,
+                self.back.clone(),
+                diff.clone() * self.to_back.clone(),
+                IndexingUpdateOp::Add,
+            )
+            .select_assign(
+                1,
+                self.front.clone(),
+                diff.neg() * self.to_front.clone(),
+                IndexingUpdateOp::Add,
+            );
+        Ok(out.reshape([c, h, w]))
+    }
 }

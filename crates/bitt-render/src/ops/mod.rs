@@ -35,10 +35,10 @@ mod interpolate;
 mod raster;
 mod texture;
 
-pub use antialias::{SilhouettePairs, antialias, silhouette_pairs};
+pub use antialias::{AntialiasPlan, SilhouettePairs, antialias, silhouette_pairs};
 pub use interpolate::{interpolate, interpolate_with_faces};
 pub use raster::{Raster, rasterize};
-pub use texture::texture;
+pub use texture::{TexturePlan, texture};
 
 use crate::error::{RenderError, check_faces};
 

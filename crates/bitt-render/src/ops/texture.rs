@@ -1,4 +1,5 @@
-//! [`texture`]: bilinear sampling with the reference's conventions.
+//! [`texture`]: bilinear sampling with the reference's conventions, and [`TexturePlan`], its
+//! UV-dependent part prepared once for UVs that do not change (fixed geometry).
 
 use burn::tensor::{Int, Tensor};
 
@@ -21,33 +22,110 @@ use crate::error::RenderError;
 /// # Errors
 /// When `uv` is not `[N, 2]` or the texture has no channels.
 pub fn texture(image: Tensor<3>, uv: Tensor<2>) -> Result<Tensor<2>, RenderError> {
-    let [c, ht, wt] = image.dims();
-    if c == 0 {
-        return Err(RenderError::ZeroChannels);
+    let [_, ht, wt] = image.dims();
+    TexturePlan::new(uv, ht, wt)?.sample(image)
+}
+
+/// The part of [`texture`] that depends only on the UVs and the texture's size: the four
+/// texel indices around every sample and the bilinear weights (which keep the UVs'
+/// gradient). Made once, it samples any number of textures of that size at the same UVs,
+/// as a training step does for every render of a fixed geometry.
+#[derive(Debug, Clone)]
+pub struct TexturePlan {
+    height: usize,
+    width: usize,
+    samples: usize,
+    /// Flat texel indices `row * Wt + col` of the corners (y0 x0, y0 x1, y1 x0, y1 x1).
+    corners: [Tensor<1, Int>; 4],
+    /// Upper weights along x and y, `[1, N]` each.
+    fx: Tensor<2>,
+    fy: Tensor<2>,
+}
+
+impl TexturePlan {
+    /// Prepares sampling a `height x width` texture at `uv` (see [`texture`]).
+    ///
+    /// # Shapes
+    /// uv `[N, 2]`
+    ///
+    /// # Errors
+    /// When `uv` is not `[N, 2]` or the size is zero or too large.
+    pub fn new(uv: Tensor<2>, height: usize, width: usize) -> Result<Self, RenderError> {
+        crate::error::check_image(width, height)?;
+        check_shape("uv", uv.dims(), [None, Some(2)], || "[N, 2]".into())?;
+        let n = uv.dims()[0];
+        let device = uv.device();
+        if n == 0 {
+            let none = Tensor::<1, Int>::zeros([0], &device);
+            return Ok(Self {
+                height,
+                width,
+                samples: 0,
+                corners: [none.clone(), none.clone(), none.clone(), none],
+                fx: Tensor::zeros([1, 0], &device),
+                fy: Tensor::zeros([1, 0], &device),
+            });
+        }
+        let u = uv.clone().slice([0..n, 0..1]).reshape([n]);
+        let v = uv.slice([0..n, 1..2]).reshape([n]);
+        let x = (u * (width - 1) as f64).clamp(0.0, (width - 1) as f64);
+        let y = (v.neg() + 1.0) * (height - 1) as f64;
+        let y = y.clamp(0.0, (height - 1) as f64);
+        let (x0, x1, fx) = footprint(x, width);
+        let (y0, y1, fy) = footprint(y, height);
+        let at =
+            |row: &Tensor<1, Int>, col: &Tensor<1, Int>| row.clone() * width as i64 + col.clone();
+        Ok(Self {
+            height,
+            width,
+            samples: n,
+            corners: [at(&y0, &x0), at(&y0, &x1), at(&y1, &x0), at(&y1, &x1)],
+            fx: fx.reshape([1, n]),
+            fy: fy.reshape([1, n]),
+        })
     }
-    crate::error::check_image(wt, ht)?;
-    check_shape("uv", uv.dims(), [None, Some(2)], || "[N, 2]".into())?;
-    let n = uv.dims()[0];
-    if n == 0 {
-        return Ok(Tensor::zeros([0, c], &image.device()));
+
+    /// Number of samples `N`.
+    pub fn num_samples(&self) -> usize {
+        self.samples
     }
-    let u = uv.clone().slice([0..n, 0..1]).reshape([n]);
-    let v = uv.slice([0..n, 1..2]).reshape([n]);
-    let x = (u * (wt - 1) as f64).clamp(0.0, (wt - 1) as f64);
-    let y = (v.neg() + 1.0) * (ht - 1) as f64;
-    let y = y.clamp(0.0, (ht - 1) as f64);
-    let (x0, x1, fx) = footprint(x, wt);
-    let (y0, y1, fy) = footprint(y, ht);
-    let flat = image.reshape([c, ht * wt]);
-    let at = |row: &Tensor<1, Int>, col: &Tensor<1, Int>| {
-        flat.clone()
-            .select(1, row.clone() * wt as i64 + col.clone())
-    };
-    let (fx, fy) = (fx.reshape([1, n]), fy.reshape([1, n]));
-    let top = at(&y0, &x0) * (fx.clone().neg() + 1.0) + at(&y0, &x1) * fx.clone();
-    let bottom = at(&y1, &x0) * (fx.clone().neg() + 1.0) + at(&y1, &x1) * fx;
-    let out = top * (fy.clone().neg() + 1.0) + bottom * fy;
-    Ok(out.swap_dims(0, 1))
+
+    /// Samples `image` at the plan's UVs; differentiable in the image (and in the UVs the
+    /// plan was made from, through its weights).
+    ///
+    /// # Shapes
+    /// image `[C, Ht, Wt]` -> `[N, C]`
+    ///
+    /// # Errors
+    /// An image of another size than the plan's, or with no channels.
+    pub fn sample(&self, image: Tensor<3>) -> Result<Tensor<2>, RenderError> {
+        let [c, ht, wt] = image.dims();
+        if c == 0 {
+            return Err(RenderError::ZeroChannels);
+        }
+        check_shape(
+            "texture",
+            [c, ht, wt],
+            [None, Some(self.height), Some(self.width)],
+            || {
+                format!(
+                    "[C, {}, {}] (the plan's texture size)",
+                    self.height, self.width
+                )
+            },
+        )?;
+        let n = self.samples;
+        if n == 0 {
+            return Ok(Tensor::zeros([0, c], &image.device()));
+        }
+        let flat = image.reshape([c, ht * wt]);
+        let at = |k: usize| flat.clone().select(1, self.corners[k].clone());
+        let (fx, fy) = (self.fx.clone(), self.fy.clone());
+        let top = at(0) * (fx.clone().neg() + 1.0) + at(1) * fx.clone();
+        let bottom = at(2) * (fx.clone().neg() + 1.0) + at(3) * fx;
+        let out = top * (fy.clone().neg() + 1.0) + bottom * fy;
+        Ok(out.swap_dims(0, 1))
+    }
 }
 
 /// Lower/upper texel indices and the upper weight of clamped positions on an axis of `len`

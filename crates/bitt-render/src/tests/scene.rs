@@ -10,8 +10,8 @@ use burn::tensor::{Device, Tensor, TensorData};
 
 use super::{Rng, devices, to_vec};
 use crate::scene::{
-    Camera, DepthRange, LightValues, Material, PointLight, RenderSettings, Scene, TexelSurface,
-    TexelVisibilityStats, TexturedMesh, UnwrapSettings, phong, render, unwrap,
+    Camera, DepthRange, LightValues, Material, PointLight, RenderSettings, Scene, SceneGeometry,
+    TexelSurface, TexelVisibilityStats, TexturedMesh, UnwrapSettings, phong, render, unwrap,
 };
 
 fn tensor2(values: Vec<f32>, shape: [usize; 2], device: &Device) -> Tensor<2> {
@@ -551,5 +551,116 @@ fn render_gradients_reach_the_light_and_the_texture() {
                 g[i]
             );
         }
+    }
+}
+
+/// A geometry made once and shaded many times gives what [`render`] gives, in values and in
+/// the gradients to the texture, the light and (made from vertices with gradients) the
+/// vertices; a texture of another size than it was made for is an error.
+#[test]
+fn a_reused_scene_geometry_shades_like_render() {
+    for (name, device) in devices() {
+        let s = hand_scene(40);
+        let scene = Scene::new(&[&s.meshes[0], &s.meshes[1]]).unwrap();
+        let verts = [
+            vertex_tensor(&s.vertices[0], &device).require_grad(),
+            vertex_tensor(&s.vertices[1], &device).require_grad(),
+        ];
+        let mut rng = Rng::new(7);
+        let tex = |rng: &mut Rng| {
+            let v = (0..3 * 8 * 8)
+                .map(|_| rng.uniform(0.0, 1.0) as f32)
+                .collect();
+            Tensor::<3>::from_data(TensorData::new(v, [3, 8, 8]), &device).require_grad()
+        };
+        let (left, right) = (tex(&mut rng), tex(&mut rng));
+        let light_t = Tensor::<1>::from_data(
+            TensorData::new(LightValues::default().to_array().to_vec(), [12]),
+            &device,
+        )
+        .require_grad();
+        let light = PointLight::from_tensor(light_t.clone()).unwrap();
+        let settings = RenderSettings::default();
+        let once = SceneGeometry::new(&scene, &verts, &s.camera, &settings, &[[8, 8]; 2]).unwrap();
+        assert!(
+            once.raster.num_covered() > 50,
+            "{name}: hands cover the image"
+        );
+        let weights = Tensor::<3>::from_data(
+            TensorData::new(
+                (0..3 * 40 * 40)
+                    .map(|_| rng.uniform(0.0, 1.0) as f32)
+                    .collect(),
+                [3, 40, 40],
+            ),
+            &device,
+        );
+        let textures = [left.clone(), right.clone()];
+        let direct = render(&scene, &verts, &textures, &s.camera, &light, &settings).unwrap();
+        let light = PointLight::from_tensor(light_t.clone().detach()).unwrap();
+        // Shade the same geometry twice: the second use must not differ from the first.
+        let first = once
+            .shade(&textures, &light, &settings.material, settings.background)
+            .unwrap();
+        let second = once
+            .shade(&textures, &light, &settings.material, settings.background)
+            .unwrap();
+        let (d, a, b) = (
+            to_vec(direct.image.clone()),
+            to_vec(first.clone()),
+            to_vec(second.clone()),
+        );
+        assert_eq!(a, b, "{name}: reuse changes nothing");
+        let max = d
+            .iter()
+            .zip(&a)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f32::max);
+        assert!(
+            max < 1e-6,
+            "{name}: geometry + shade vs render differ by {max}"
+        );
+        // Gradients: a geometry made from vertices with gradients serves one backward pass
+        // (burn keeps no graph after it), so both shadings enter one loss, which must have
+        // twice the gradients of one render.
+        let grads_of = |image: Tensor<3>| {
+            let g = (image * weights.clone()).sum().backward();
+            [
+                to_vec(left.grad(&g).unwrap()),
+                to_vec(right.grad(&g).unwrap()),
+                to_vec(light_t.grad(&g).unwrap()),
+                to_vec(verts[0].grad(&g).unwrap()),
+                to_vec(verts[1].grad(&g).unwrap()),
+            ]
+        };
+        let gd = grads_of(direct.image);
+        let light = PointLight::from_tensor(light_t.clone()).unwrap();
+        let shade = || {
+            once.shade(&textures, &light, &settings.material, settings.background)
+                .unwrap()
+        };
+        let gs = grads_of(shade() + shade());
+        for (k, (x, y)) in gd.iter().zip(&gs).enumerate() {
+            let max = x
+                .iter()
+                .zip(y)
+                .map(|(p, q)| (2.0 * p - q).abs())
+                .fold(0.0, f32::max);
+            let scale = x.iter().map(|v| v.abs()).fold(1e-3, f32::max);
+            assert!(
+                max <= 1e-5 * scale,
+                "{name}: gradient {k} differs by {max} (scale {scale})"
+            );
+        }
+        let small = Tensor::<3>::zeros([3, 4, 4], &device);
+        let err = once
+            .shade(
+                &[small.clone(), small],
+                &light,
+                &settings.material,
+                [0.0; 3],
+            )
+            .unwrap_err();
+        assert!(err.to_string().contains("texture"), "{name}: {err}");
     }
 }

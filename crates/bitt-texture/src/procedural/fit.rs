@@ -2,13 +2,16 @@
 
 use bitt_mesh::{HandModel, Side, default_hand};
 use burn::tensor::Device;
+use rayon::prelude::*;
 
 use super::generate::generate_texture;
 use super::identity::SkinIdentity;
 use super::noise::derive;
 use crate::TextureError;
 use crate::layout::TextureLayout;
-use crate::pca::{PcaFitReport, TexturePca};
+use crate::pca::{
+    FitProgress, FitStage, NoProgress, PcaFitReport, PcaProjector, StageCounter, TexturePca,
+};
 
 /// Ridge of the least-squares projections in the evaluation (a colour noise variance; the
 /// fitted parameters have unit variance).
@@ -108,6 +111,8 @@ pub struct EvalReport {
 /// left and right textures of a person are both samples: the hands share their UV layout),
 /// and evaluates it on the training people and on `config.held_out` unseen ones.
 ///
+/// [`procedural_texture_pca_with_progress`] without progress reports.
+///
 /// # Errors
 /// [`TextureError::Invalid`] for a configuration outside its ranges, and any error of
 /// [`TextureLayout::from_uv`] or [`TexturePca::fit`].
@@ -115,6 +120,64 @@ pub fn procedural_texture_pca(
     config: &ProceduralTextureConfig,
     device: &Device,
 ) -> Result<(TexturePca, PcaFitReport, EvalReport), TextureError> {
+    procedural_texture_pca_with_progress(config, device, &NoProgress)
+}
+
+/// [`procedural_texture_pca`], on all cores, reporting its stages to `progress`:
+/// [`FitStage::Generate`] (one step per identity, training and held-out together), the
+/// stages of [`TexturePca::fit_with_progress`], then [`FitStage::Evaluate`] (the normal
+/// equations, then one step per projected sample).
+///
+/// The identities are generated in parallel (rayon) and every sum runs in the same order
+/// as in the sequential code, so the model and the report are the same bit for bit for any
+/// number of threads.
+///
+/// # Errors
+/// As [`procedural_texture_pca`].
+pub fn procedural_texture_pca_with_progress(
+    config: &ProceduralTextureConfig,
+    device: &Device,
+    progress: &dyn FitProgress,
+) -> Result<(TexturePca, PcaFitReport, EvalReport), TextureError> {
+    let (pca, report, train, held) = fit_model(config, device, progress, true)?;
+    let eval = StageCounter::new(progress, FitStage::Evaluate, 1 + train.len() + held.len());
+    let projector = pca.projector(None, EVAL_RIDGE)?;
+    eval.step();
+    let eval = EvalReport {
+        train_rmse: reconstruction_rmse(&pca, &projector, &train, &eval)?,
+        held_out_rmse: reconstruction_rmse(&pca, &projector, &held, &eval)?,
+        held_out_mean_rmse: rmse_against(&pca.mean, &held),
+        train_mean_rmse: rmse_against(&pca.mean, &train),
+        explained_variance_at_k: report.explained_variance_ratio.iter().sum(),
+    };
+    Ok((pca, report, eval))
+}
+
+/// The model of [`procedural_texture_pca_with_progress`] without its evaluation: the
+/// held-out people are neither generated nor projected (what a trainer needs; the same
+/// model and fit report, bit for bit). Reports [`FitStage::Generate`] (training identities)
+/// and the stages of [`TexturePca::fit_with_progress`].
+///
+/// # Errors
+/// As [`procedural_texture_pca`].
+pub fn procedural_texture_model(
+    config: &ProceduralTextureConfig,
+    device: &Device,
+    progress: &dyn FitProgress,
+) -> Result<(TexturePca, PcaFitReport), TextureError> {
+    let (pca, report, _, _) = fit_model(config, device, progress, false)?;
+    Ok((pca, report))
+}
+
+/// The fitted model, its report, the training samples and (when `held_out`) the held-out
+/// samples.
+#[allow(clippy::type_complexity)]
+fn fit_model(
+    config: &ProceduralTextureConfig,
+    device: &Device,
+    progress: &dyn FitProgress,
+    held_out: bool,
+) -> Result<(TexturePca, PcaFitReport, Vec<Vec<f32>>, Vec<Vec<f32>>), TextureError> {
     config.validate()?;
     let right = default_hand(Side::Right);
     let left = default_hand(Side::Left);
@@ -123,75 +186,67 @@ pub fn procedural_texture_pca(
         .as_ref()
         .ok_or_else(|| TextureError::Invalid("the procedural hand has no UV layout".into()))?;
     let layout = TextureLayout::from_uv(uv, config.resolution, config.resolution, config.gutter)?;
-    let train_ids: Vec<SkinIdentity> = (0..config.identities)
+    let held_count = if held_out { config.held_out } else { 0 };
+    let ids: Vec<SkinIdentity> = (0..config.identities)
         .map(|i| config.training_identity(i))
+        .chain((0..held_count).map(|j| config.held_out_identity(j)))
         .collect();
-    let held_ids: Vec<SkinIdentity> = (0..config.held_out)
-        .map(|j| config.held_out_identity(j))
-        .collect();
-    let train = both_hands(&layout, &left, &right, &train_ids)?;
-    let held = both_hands(&layout, &left, &right, &held_ids)?;
-    let (pca, report) = TexturePca::fit(layout, &train, config.components, device)?;
-    let eval = EvalReport {
-        train_rmse: reconstruction_rmse(&pca, &train)?,
-        held_out_rmse: reconstruction_rmse(&pca, &held)?,
-        held_out_mean_rmse: rmse_against(&pca.mean, &held),
-        train_mean_rmse: rmse_against(&pca.mean, &train),
-        explained_variance_at_k: report.explained_variance_ratio.iter().sum(),
-    };
-    Ok((pca, report, eval))
+    let stage = StageCounter::new(progress, FitStage::Generate, ids.len());
+    let mut train = both_hands(&layout, &left, &right, &ids, &stage)?;
+    stage.finish();
+    let held = train.split_off(2 * config.identities);
+    let (pca, report) =
+        TexturePca::fit_with_progress(layout, &train, config.components, device, progress)?;
+    Ok((pca, report, train, held))
 }
 
-/// Left then right texture of every identity, generated on all available cores.
+/// Left then right texture of every identity, the identities in parallel (rayon), one
+/// progress step per identity.
 fn both_hands(
     layout: &TextureLayout,
     left: &HandModel,
     right: &HandModel,
     ids: &[SkinIdentity],
+    stage: &StageCounter<'_>,
 ) -> Result<Vec<Vec<f32>>, TextureError> {
-    let jobs: Vec<(&SkinIdentity, Side)> = ids
-        .iter()
-        .flat_map(|id| Side::BOTH.map(|s| (id, s)))
+    let per_id: Vec<Result<[Vec<f32>; 2], TextureError>> = ids
+        .par_iter()
+        .map(|id| {
+            let l = generate_texture(layout, left, id, Side::Left)?;
+            let r = generate_texture(layout, right, id, Side::Right)?;
+            stage.step();
+            Ok([l, r])
+        })
         .collect();
-    let threads = std::thread::available_parallelism()
-        .map_or(1, |n| n.get())
-        .min(jobs.len())
-        .max(1);
-    let chunk = jobs.len().div_ceil(threads);
-    let results: Vec<Result<Vec<Vec<f32>>, TextureError>> = std::thread::scope(|scope| {
-        let handles: Vec<_> = jobs
-            .chunks(chunk.max(1))
-            .map(|part| {
-                scope.spawn(move || {
-                    part.iter()
-                        .map(|(id, side)| {
-                            let hand = if *side == Side::Left { left } else { right };
-                            generate_texture(layout, hand, id, *side)
-                        })
-                        .collect()
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-            .collect()
-    });
-    let mut out = Vec::with_capacity(jobs.len());
-    for r in results {
+    let mut out = Vec::with_capacity(2 * ids.len());
+    for r in per_id {
         out.extend(r?);
     }
     Ok(out)
 }
 
-/// RMSE of the model's least-squares reconstructions of `samples`.
-fn reconstruction_rmse(pca: &TexturePca, samples: &[Vec<f32>]) -> Result<f32, TextureError> {
+/// RMSE of the model's least-squares reconstructions of `samples` (projected in parallel;
+/// the per-sample sums are added in order, as a sequential loop would), one progress step
+/// per sample.
+fn reconstruction_rmse(
+    pca: &TexturePca,
+    projector: &PcaProjector<'_>,
+    samples: &[Vec<f32>],
+    stage: &StageCounter<'_>,
+) -> Result<f32, TextureError> {
+    let errors: Vec<Result<f64, TextureError>> = samples
+        .par_iter()
+        .map(|s| {
+            let params = projector.project(s)?;
+            let recon = pca.texture(&params)?;
+            stage.step();
+            Ok(squared_error(&recon, s))
+        })
+        .collect();
     let mut sum = 0.0f64;
     let mut count = 0usize;
-    for s in samples {
-        let params = pca.project(s, None, EVAL_RIDGE)?;
-        let recon = pca.texture(&params)?;
-        sum += squared_error(&recon, s);
+    for (e, s) in errors.into_iter().zip(samples) {
+        sum += e?;
         count += s.len();
     }
     Ok((sum / count.max(1) as f64).sqrt() as f32)
@@ -211,6 +266,7 @@ fn squared_error(a: &[f32], b: &[f32]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_util::{Recorder, on_threads};
 
     fn small() -> ProceduralTextureConfig {
         ProceduralTextureConfig {
@@ -221,6 +277,124 @@ mod tests {
             seed: 5,
             gutter: 1,
         }
+    }
+
+    fn tiny() -> ProceduralTextureConfig {
+        ProceduralTextureConfig {
+            resolution: 128,
+            identities: 3,
+            held_out: 1,
+            components: 3,
+            seed: 9,
+            gutter: 1,
+        }
+    }
+
+    /// The model and evaluation as computed before the fit ran on rayon: textures one at a
+    /// time, the sequential fit, one projection (with its own normal equations) per sample.
+    fn previous(config: &ProceduralTextureConfig) -> (TexturePca, PcaFitReport, EvalReport) {
+        let right = default_hand(Side::Right);
+        let left = default_hand(Side::Left);
+        let uv = right.uv.as_ref().unwrap();
+        let layout =
+            TextureLayout::from_uv(uv, config.resolution, config.resolution, config.gutter)
+                .unwrap();
+        let textures = |ids: Vec<SkinIdentity>| -> Vec<Vec<f32>> {
+            ids.iter()
+                .flat_map(|id| {
+                    [
+                        generate_texture(&layout, &left, id, Side::Left).unwrap(),
+                        generate_texture(&layout, &right, id, Side::Right).unwrap(),
+                    ]
+                })
+                .collect()
+        };
+        let train = textures(
+            (0..config.identities)
+                .map(|i| config.training_identity(i))
+                .collect(),
+        );
+        let held = textures(
+            (0..config.held_out)
+                .map(|j| config.held_out_identity(j))
+                .collect(),
+        );
+        let (pca, report) = on_threads(1, || {
+            TexturePca::fit(layout.clone(), &train, config.components, &Device::flex()).unwrap()
+        });
+        let rmse = |samples: &[Vec<f32>]| {
+            let mut sum = 0.0f64;
+            let mut count = 0usize;
+            for s in samples {
+                let params = pca.project(s, None, EVAL_RIDGE).unwrap();
+                sum += squared_error(&pca.texture(&params).unwrap(), s);
+                count += s.len();
+            }
+            (sum / count as f64).sqrt() as f32
+        };
+        let eval = EvalReport {
+            train_rmse: rmse(&train),
+            held_out_rmse: rmse(&held),
+            held_out_mean_rmse: rmse_against(&pca.mean, &held),
+            train_mean_rmse: rmse_against(&pca.mean, &train),
+            explained_variance_at_k: report.explained_variance_ratio.iter().sum(),
+        };
+        (pca, report, eval)
+    }
+
+    #[test]
+    fn parallel_procedural_pca_equals_the_sequential_one_bit_for_bit() {
+        let config = tiny();
+        let want = previous(&config);
+        for threads in [1, 3] {
+            let got = on_threads(threads, || {
+                procedural_texture_pca(&config, &Device::flex()).unwrap()
+            });
+            assert_eq!(got, want, "{threads} threads");
+        }
+        // Without the evaluation: the same model.
+        let (pca, report) = on_threads(2, || {
+            procedural_texture_model(&config, &Device::flex(), &NoProgress).unwrap()
+        });
+        assert_eq!((pca, report), (want.0, want.1));
+    }
+
+    #[test]
+    fn procedural_pca_reports_every_stage_monotonically() {
+        let config = tiny();
+        let rec = Recorder::default();
+        on_threads(2, || {
+            procedural_texture_pca_with_progress(&config, &Device::flex(), &rec).unwrap()
+        });
+        let totals = rec.check(&[
+            FitStage::Generate,
+            FitStage::Centre,
+            FitStage::Gram,
+            FitStage::Eigen,
+            FitStage::Basis,
+            FitStage::Evaluate,
+        ]);
+        // Training and held-out identities; the normal equations and the 2 x 4 samples.
+        assert_eq!(totals[0], 4);
+        assert_eq!(totals[5], 1 + 8);
+        let calls = rec.0.lock().unwrap().clone();
+        let generated: Vec<usize> = calls
+            .iter()
+            .filter(|c| c.0 == FitStage::Generate)
+            .map(|c| c.1)
+            .collect();
+        assert_eq!(generated, [0, 1, 2, 3, 4], "one step per identity");
+        // Without the evaluation: training identities only, no evaluation stage.
+        let rec = Recorder::default();
+        procedural_texture_model(&config, &Device::flex(), &rec).unwrap();
+        let totals = rec.check(&[
+            FitStage::Generate,
+            FitStage::Centre,
+            FitStage::Gram,
+            FitStage::Eigen,
+            FitStage::Basis,
+        ]);
+        assert_eq!(totals[0], 3);
     }
 
     #[test]

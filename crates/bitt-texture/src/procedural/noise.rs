@@ -1,6 +1,8 @@
 //! Deterministic randomness: a SplitMix64 generator, lattice hashing, 3D gradient noise and
 //! fractal (fBm) sums of it, with octaves finer than the texel size faded out.
 
+use std::cell::RefCell;
+
 use bitt_mesh::glam::DVec3;
 
 /// SplitMix64 (Steele, Lea and Flood 2014): a tiny, fast, statistically solid generator.
@@ -64,8 +66,33 @@ pub fn unit(h: u64) -> f64 {
     (h >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
 }
 
-/// Unit gradient of a lattice point (a uniformly random direction).
+/// log2 of the slots of the per-thread cache of lattice gradients.
+const GRADIENT_CACHE_BITS: u32 = 12;
+
+/// Unit gradient of a lattice point (a uniformly random direction): [`gradient_of`], from a
+/// small per-thread direct-mapped cache keyed by the hash (neighbouring texels share most
+/// lattice corners, and the cosine and sine dominate the cost of noise). The cached value
+/// is the computed one, so results are unchanged bit for bit.
 fn gradient(h: u64) -> DVec3 {
+    thread_local! {
+        static CACHE: RefCell<Vec<(u64, DVec3)>> = const { RefCell::new(Vec::new()) };
+    }
+    CACHE.with(|cache| {
+        let mut cache = cache.borrow_mut();
+        if cache.is_empty() {
+            // Every slot starts as the (valid) entry of hash 0.
+            cache.resize(1 << GRADIENT_CACHE_BITS, (0, gradient_of(0)));
+        }
+        let slot = &mut cache[(h >> (64 - GRADIENT_CACHE_BITS)) as usize];
+        if slot.0 != h {
+            *slot = (h, gradient_of(h));
+        }
+        slot.1
+    })
+}
+
+/// The unit gradient of hash `h`, computed.
+fn gradient_of(h: u64) -> DVec3 {
     let z = 2.0 * unit(h) - 1.0;
     let a = std::f64::consts::TAU * unit(mix64(h));
     let r = (1.0 - z * z).max(0.0).sqrt();
@@ -79,6 +106,12 @@ fn fade(t: f64) -> f64 {
 
 /// 3D gradient (Perlin-style) noise with unit lattice spacing, roughly in `[-1, 1]`.
 pub fn gradient_noise(seed: u64, p: DVec3) -> f64 {
+    gradient_noise_with(seed, p, gradient)
+}
+
+/// [`gradient_noise`] with the lattice gradients from `gradient`.
+#[inline(always)]
+fn gradient_noise_with(seed: u64, p: DVec3, gradient: impl Fn(u64) -> DVec3) -> f64 {
     let base = p.floor();
     let f = p - base;
     let (ix, iy, iz) = (base.x as i64, base.y as i64, base.z as i64);
@@ -142,6 +175,37 @@ pub fn line_profile(d: f64, width: f64, texel: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn cached_gradients_are_the_computed_ones() {
+        let mut rng = SplitMix64::new(17);
+        // Random hashes, repeated (hits) and colliding in the cache (misses after eviction).
+        let hashes: Vec<u64> = (0..5000).map(|_| rng.next_u64()).collect();
+        for _ in 0..3 {
+            for &h in hashes.iter().chain(&[0, 1, u64::MAX]) {
+                let (a, b) = (gradient(h), gradient_of(h));
+                assert_eq!(
+                    a.to_array().map(f64::to_bits),
+                    b.to_array().map(f64::to_bits)
+                );
+            }
+        }
+        // Noise through the cache equals noise from computed gradients.
+        for seed in [3, 99] {
+            for _ in 0..20_000 {
+                let p = DVec3::new(
+                    rng.range(-9.0, 9.0),
+                    rng.range(-9.0, 9.0),
+                    rng.range(-9.0, 9.0),
+                );
+                let (a, b) = (
+                    gradient_noise(seed, p),
+                    gradient_noise_with(seed, p, gradient_of),
+                );
+                assert_eq!(a.to_bits(), b.to_bits());
+            }
+        }
+    }
 
     #[test]
     fn splitmix_is_deterministic_and_uniform() {

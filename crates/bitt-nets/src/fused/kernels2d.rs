@@ -1,0 +1,990 @@
+//! CPU kernels of a 2-D convolution (+ bias) followed by an optional instance norm and an
+//! activation, on plain `f32` slices (`[batch, channels, height, width]`, row-major).
+//!
+//! The convolution is im2col + GEMM in tiles of output pixels: a tile's patch matrix
+//! `[C_in kh kw, tile]` stays in cache (one buffer per call, reused for every tile) and one
+//! GEMM writes the tile's columns of the output; a 1x1 stride-1 convolution is one GEMM over
+//! the input itself. The backward pass walks the same tiles: `dW += dz_tile col^T` and
+//! `dcol = W^T dz_tile`, scattered back (col2im) channel by channel in parallel. The GEMMs
+//! run multi-threaded on rayon's pool, the patch gathers and scatters parallel over rows.
+//! Instance norm + activation is one pass per `(sample, channel)` row forward (after the
+//! moments) and two backward, rows in parallel.
+
+use pulp::Arch;
+use rayon::prelude::*;
+
+use super::gemm::{MatMut, MatRef, matmul};
+
+/// Sizes of a 2-D convolution with symmetric zero padding and no dilation or groups.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Conv2dDims {
+    pub batch: usize,
+    pub c_in: usize,
+    pub c_out: usize,
+    /// Input height and width.
+    pub size: [usize; 2],
+    pub kernel: [usize; 2],
+    pub stride: [usize; 2],
+    /// Zero padding on both sides of each axis.
+    pub padding: [usize; 2],
+}
+
+/// Patch-matrix elements per tile (1 MiB of `f32`: the tile stays in the L2 cache).
+const COL_BUDGET: usize = 1 << 18;
+/// Fewest output pixels per tile (narrower GEMMs waste the packed weight).
+const MIN_TILE: usize = 128;
+
+impl Conv2dDims {
+    /// The output height and width, `None` when the kernel does not fit the padded input or
+    /// a size or stride is zero.
+    pub fn out_size(&self) -> Option<[usize; 2]> {
+        let mut out = [0; 2];
+        for (a, o) in out.iter_mut().enumerate() {
+            let padded = self.size[a] + 2 * self.padding[a];
+            if self.stride[a] == 0 || self.kernel[a] == 0 || self.kernel[a] > padded {
+                return None;
+            }
+            *o = (padded - self.kernel[a]) / self.stride[a] + 1;
+        }
+        Some(out)
+    }
+
+    fn out(&self) -> [usize; 2] {
+        self.out_size().expect("valid convolution sizes")
+    }
+
+    /// Output pixels per sample.
+    pub fn pixels(&self) -> usize {
+        let [h, w] = self.out();
+        h * w
+    }
+
+    /// Rows of the patch matrix, `C_in kh kw`.
+    pub fn patch(&self) -> usize {
+        self.c_in * self.kernel[0] * self.kernel[1]
+    }
+
+    fn plane(&self) -> usize {
+        self.size[0] * self.size[1]
+    }
+
+    /// A 1x1, stride-1, unpadded convolution: a matrix product over the input itself.
+    fn pointwise(&self) -> bool {
+        self.kernel == [1, 1] && self.stride == [1, 1] && self.padding == [0, 0]
+    }
+
+    /// Output pixels per tile.
+    fn tile(&self) -> usize {
+        (COL_BUDGET / self.patch().max(1))
+            .max(MIN_TILE)
+            .min(self.pixels())
+            .max(1)
+    }
+
+    /// The weight `[C_out, C_in kh kw]`.
+    fn weight<'a>(&self, weight: &'a [f32]) -> MatRef<'a> {
+        let k = self.patch();
+        MatRef {
+            data: weight,
+            rows: self.c_out,
+            cols: k,
+            row_stride: k,
+            col_stride: 1,
+        }
+    }
+
+    /// The weight transposed, `[C_in kh kw, C_out]`.
+    fn weight_t<'a>(&self, weight: &'a [f32]) -> MatRef<'a> {
+        let k = self.patch();
+        MatRef {
+            data: weight,
+            rows: k,
+            cols: self.c_out,
+            row_stride: 1,
+            col_stride: k,
+        }
+    }
+}
+
+/// Indices `u` in `[0, count)` with `0 <= (start + u) stride + offset < size`.
+fn valid(start: usize, count: usize, stride: usize, offset: isize, size: usize) -> (usize, usize) {
+    let s = stride as isize;
+    // First output index whose input index is >= 0, and the end of those below `size`.
+    let first = if offset >= 0 {
+        0
+    } else {
+        (-offset + s - 1) / s
+    };
+    let end = if size as isize > offset {
+        (size as isize - offset + s - 1) / s
+    } else {
+        0
+    };
+    let lo = (first - start as isize).clamp(0, count as isize) as usize;
+    let hi = (end - start as isize).clamp(0, count as isize) as usize;
+    (lo, hi.max(lo))
+}
+
+/// Walks patch row `k` (channel `c`, tap `(i, j)`) over the tile's pixels `[p0, p0 + n)`:
+/// calls `f(t, Some(input index in the plane))` for each tile column `t` that reads the
+/// input and `f(t, None)` for those in the padding. Runs are handed over as ranges:
+/// `f(t0..t1, Some(first), step)` or `f(t0..t1, None, 0)`.
+fn walk_row(
+    d: &Conv2dDims,
+    tap: (usize, usize),
+    p0: usize,
+    n: usize,
+    mut f: impl FnMut(std::ops::Range<usize>, Option<usize>, usize),
+) {
+    let [_, ow] = d.out();
+    let [h, w] = d.size;
+    let (i, j) = tap;
+    let mut t = 0;
+    while t < n {
+        let p = p0 + t;
+        let (oy, ox0) = (p / ow, p % ow);
+        let seg = (ow - ox0).min(n - t);
+        let iy = (oy * d.stride[0] + i) as isize - d.padding[0] as isize;
+        if iy < 0 || iy >= h as isize {
+            f(t..t + seg, None, 0);
+        } else {
+            let off = j as isize - d.padding[1] as isize;
+            let (lo, hi) = valid(ox0, seg, d.stride[1], off, w);
+            if lo > 0 {
+                f(t..t + lo, None, 0);
+            }
+            if hi > lo {
+                let ix = ((ox0 + lo) * d.stride[1]) as isize + off;
+                f(
+                    t + lo..t + hi,
+                    Some(iy as usize * w + ix as usize),
+                    d.stride[1],
+                );
+            }
+            if hi < seg {
+                f(t + hi..t + seg, None, 0);
+            }
+        }
+        t += seg;
+    }
+}
+
+/// The patch matrix of one sample's tile: `col[k, t]` is input channel `c`, tap `(i, j)`
+/// (`k = (c kh + i) kw + j`) of output pixel `p0 + t`, zero in the padding.
+///
+/// # Shapes
+/// - `x`: `[C_in, H, W]`; `col`: at least `[C_in kh kw, n]`
+fn im2col(x: &[f32], d: &Conv2dDims, p0: usize, n: usize, col: &mut [f32]) {
+    let [kh, kw] = d.kernel;
+    let plane = d.plane();
+    col[..d.patch() * n]
+        .par_chunks_mut(n)
+        .with_min_len(4)
+        .enumerate()
+        .for_each(|(k, row)| {
+            let (c, r) = (k / (kh * kw), k % (kh * kw));
+            let src = &x[c * plane..(c + 1) * plane];
+            walk_row(d, (r / kw, r % kw), p0, n, |ts, from, step| match from {
+                None => row[ts].fill(0.0),
+                Some(s0) if step == 1 => {
+                    let len = ts.len();
+                    row[ts].copy_from_slice(&src[s0..s0 + len]);
+                }
+                Some(s0) => {
+                    for (u, v) in row[ts].iter_mut().enumerate() {
+                        *v = src[s0 + u * step];
+                    }
+                }
+            });
+        });
+}
+
+/// The adjoint of [`im2col`]: adds `dcol` back into one sample's input gradient, channels
+/// in parallel (each channel owns its patch rows, so no two threads write one element).
+///
+/// # Shapes
+/// - `dx`: `[C_in, H, W]`; `dcol`: at least `[C_in kh kw, n]`
+fn col2im_add(dcol: &[f32], d: &Conv2dDims, p0: usize, n: usize, dx: &mut [f32]) {
+    let [kh, kw] = d.kernel;
+    let taps = kh * kw;
+    dx.par_chunks_mut(d.plane())
+        .enumerate()
+        .for_each(|(c, plane)| {
+            for r in 0..taps {
+                let row = &dcol[(c * taps + r) * n..(c * taps + r + 1) * n];
+                walk_row(d, (r / kw, r % kw), p0, n, |ts, from, step| {
+                    if let Some(s0) = from {
+                        for (u, v) in row[ts].iter().enumerate() {
+                            plane[s0 + u * step] += v;
+                        }
+                    }
+                });
+            }
+        });
+}
+
+/// `z[b, o] = sum_k W[o, k] col_b[k] + bias[o]`: the convolution with its bias (`bias`
+/// empty for none).
+///
+/// # Shapes
+/// - `x`: `[B, C_in, H, W]`; `weight`: `[C_out, C_in, kh, kw]`; `bias`: `[C_out]` or `[]`
+/// - output: `[B, C_out, OH, OW]`
+pub(crate) fn conv2d_forward(x: &[f32], weight: &[f32], bias: &[f32], d: Conv2dDims) -> Vec<f32> {
+    assert_eq!(x.len(), d.batch * d.c_in * d.plane(), "conv2d_forward: x");
+    assert_eq!(weight.len(), d.c_out * d.patch(), "conv2d_forward: w");
+    assert!(
+        bias.is_empty() || bias.len() == d.c_out,
+        "conv2d_forward: bias"
+    );
+    let (pixels, k) = (d.pixels(), d.patch());
+    let mut z = vec![0.0f32; d.batch * d.c_out * pixels];
+    if z.is_empty() {
+        return z;
+    }
+    let w = d.weight(weight);
+    if d.pointwise() {
+        for (xb, zb) in x
+            .chunks_exact(d.c_in * pixels)
+            .zip(z.chunks_exact_mut(d.c_out * pixels))
+        {
+            matmul(
+                MatMut {
+                    data: zb,
+                    rows: d.c_out,
+                    cols: pixels,
+                    row_stride: pixels,
+                    col_stride: 1,
+                },
+                w,
+                MatRef {
+                    data: xb,
+                    rows: d.c_in,
+                    cols: pixels,
+                    row_stride: pixels,
+                    col_stride: 1,
+                },
+                false,
+                true,
+            );
+        }
+    } else {
+        let tile = d.tile();
+        let mut col = vec![0.0f32; k * tile];
+        for (xb, zb) in x
+            .chunks_exact(d.c_in * d.plane())
+            .zip(z.chunks_exact_mut(d.c_out * pixels))
+        {
+            for p0 in (0..pixels).step_by(tile) {
+                let n = tile.min(pixels - p0);
+                im2col(xb, &d, p0, n, &mut col);
+                matmul(
+                    MatMut {
+                        data: &mut zb[p0..],
+                        rows: d.c_out,
+                        cols: n,
+                        row_stride: pixels,
+                        col_stride: 1,
+                    },
+                    w,
+                    MatRef {
+                        data: &col[..k * n],
+                        rows: k,
+                        cols: n,
+                        row_stride: n,
+                        col_stride: 1,
+                    },
+                    false,
+                    true,
+                );
+            }
+        }
+    }
+    if !bias.is_empty() {
+        z.par_chunks_exact_mut(pixels)
+            .enumerate()
+            .for_each(|(row, zr)| {
+                let b = bias[row % d.c_out];
+                zr.iter_mut().for_each(|v| *v += b);
+            });
+    }
+    z
+}
+
+/// Gradients of [`conv2d_forward`] with respect to the input and the weight (each only
+/// when asked for; the bias gradient is the row sums of `dz`, see [`post_backward_in_place`]).
+///
+/// # Shapes
+/// - `dz`: `[B, C_out, OH, OW]`; `x`: `[B, C_in, H, W]`; `weight`: `[C_out, C_in, kh, kw]`
+/// - output: (`[B, C_in, H, W]`, `[C_out, C_in, kh, kw]`)
+pub(crate) fn conv2d_backward(
+    dz: &[f32],
+    x: &[f32],
+    weight: &[f32],
+    d: Conv2dDims,
+    need_dx: bool,
+    need_dw: bool,
+) -> (Option<Vec<f32>>, Option<Vec<f32>>) {
+    let (pixels, k) = (d.pixels(), d.patch());
+    assert_eq!(dz.len(), d.batch * d.c_out * pixels, "conv2d_backward: dz");
+    assert_eq!(x.len(), d.batch * d.c_in * d.plane(), "conv2d_backward: x");
+    assert_eq!(weight.len(), d.c_out * k, "conv2d_backward: w");
+    let mut dx = need_dx.then(|| vec![0.0f32; x.len()]);
+    let mut dw = need_dw.then(|| vec![0.0f32; weight.len()]);
+    let wt = d.weight_t(weight);
+    // Columns `[p0, p0 + n)` of one sample's `dz` `[C_out, pixels]`.
+    fn dz_cols(gb: &[f32], rows: usize, pixels: usize, p0: usize, n: usize) -> MatRef<'_> {
+        MatRef {
+            data: &gb[p0..],
+            rows,
+            cols: n,
+            row_stride: pixels,
+            col_stride: 1,
+        }
+    }
+    fn dw_mat(dw: &mut [f32], rows: usize, k: usize) -> MatMut<'_> {
+        MatMut {
+            data: dw,
+            rows,
+            cols: k,
+            row_stride: k,
+            col_stride: 1,
+        }
+    }
+    if pixels == 0 || d.batch == 0 {
+        return (dx, dw);
+    }
+    if d.pointwise() {
+        for b in 0..d.batch {
+            let gb = &dz[b * d.c_out * pixels..(b + 1) * d.c_out * pixels];
+            let xb = &x[b * d.c_in * pixels..(b + 1) * d.c_in * pixels];
+            if let Some(dw) = dw.as_mut() {
+                // dW += dz_b x_b^T.
+                let xt = MatRef {
+                    data: xb,
+                    rows: pixels,
+                    cols: d.c_in,
+                    row_stride: 1,
+                    col_stride: pixels,
+                };
+                matmul(
+                    dw_mat(dw, d.c_out, k),
+                    dz_cols(gb, d.c_out, pixels, 0, pixels),
+                    xt,
+                    true,
+                    true,
+                );
+            }
+            if let Some(dx) = dx.as_mut() {
+                let dxb = MatMut {
+                    data: &mut dx[b * d.c_in * pixels..(b + 1) * d.c_in * pixels],
+                    rows: d.c_in,
+                    cols: pixels,
+                    row_stride: pixels,
+                    col_stride: 1,
+                };
+                matmul(
+                    dxb,
+                    wt,
+                    dz_cols(gb, d.c_out, pixels, 0, pixels),
+                    false,
+                    true,
+                );
+            }
+        }
+        return (dx, dw);
+    }
+    let tile = d.tile();
+    let mut col = if need_dw {
+        vec![0.0f32; k * tile]
+    } else {
+        Vec::new()
+    };
+    let mut dcol = if need_dx {
+        vec![0.0f32; k * tile]
+    } else {
+        Vec::new()
+    };
+    let plane = d.plane();
+    for b in 0..d.batch {
+        let gb = &dz[b * d.c_out * pixels..(b + 1) * d.c_out * pixels];
+        let xb = &x[b * d.c_in * plane..(b + 1) * d.c_in * plane];
+        for p0 in (0..pixels).step_by(tile) {
+            let n = tile.min(pixels - p0);
+            if let Some(dw) = dw.as_mut() {
+                im2col(xb, &d, p0, n, &mut col);
+                // dW += dz_tile col^T, col^T = [n, k].
+                let col_t = MatRef {
+                    data: &col[..k * n],
+                    rows: n,
+                    cols: k,
+                    row_stride: 1,
+                    col_stride: n,
+                };
+                matmul(
+                    dw_mat(dw, d.c_out, k),
+                    dz_cols(gb, d.c_out, pixels, p0, n),
+                    col_t,
+                    true,
+                    true,
+                );
+            }
+            if let Some(dx) = dx.as_mut() {
+                let dcol_mat = MatMut {
+                    data: &mut dcol[..k * n],
+                    rows: k,
+                    cols: n,
+                    row_stride: n,
+                    col_stride: 1,
+                };
+                matmul(
+                    dcol_mat,
+                    wt,
+                    dz_cols(gb, d.c_out, pixels, p0, n),
+                    false,
+                    true,
+                );
+                col2im_add(
+                    &dcol,
+                    &d,
+                    p0,
+                    n,
+                    &mut dx[b * d.c_in * plane..(b + 1) * d.c_in * plane],
+                );
+            }
+        }
+    }
+    (dx, dw)
+}
+
+/// The activation after the (normalised) convolution.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Activation {
+    Identity,
+    Relu,
+    /// LeakyReLU with this negative slope.
+    LeakyRelu(f64),
+    Sigmoid,
+}
+
+/// `out[t] = act(inp[t] s + h)`, the loop compiled once per activation.
+#[inline(always)]
+fn map_row(out: &mut [f32], inp: &[f32], s: f32, h: f32, act: Activation) {
+    #[inline(always)]
+    fn run(out: &mut [f32], inp: &[f32], s: f32, h: f32, f: impl Fn(f32) -> f32) {
+        for (y, &z) in out.iter_mut().zip(inp) {
+            *y = f(z * s + h);
+        }
+    }
+    match act {
+        Activation::Identity => run(out, inp, s, h, |a| a),
+        Activation::Relu => run(out, inp, s, h, |a| a.max(0.0)),
+        Activation::LeakyRelu(slope) => {
+            let slope = slope as f32;
+            run(
+                out,
+                inp,
+                s,
+                h,
+                move |a| if a >= 0.0 { a } else { a * slope },
+            );
+        }
+        Activation::Sigmoid => run(out, inp, s, h, |a| 1.0 / (1.0 + (-a).exp())),
+    }
+}
+
+/// `g[t] *= act'(z[t] s + h)`, the loop compiled once per activation.
+#[inline(always)]
+fn grad_row(g: &mut [f32], z: &[f32], s: f32, h: f32, act: Activation) {
+    #[inline(always)]
+    fn run(g: &mut [f32], z: &[f32], s: f32, h: f32, f: impl Fn(f32) -> f32) {
+        for (g, &z) in g.iter_mut().zip(z) {
+            *g *= f(z * s + h);
+        }
+    }
+    match act {
+        Activation::Identity => {}
+        Activation::Relu => run(g, z, s, h, |a| if a > 0.0 { 1.0 } else { 0.0 }),
+        Activation::LeakyRelu(slope) => {
+            let slope = slope as f32;
+            run(g, z, s, h, move |a| if a > 0.0 { 1.0 } else { slope });
+        }
+        Activation::Sigmoid => run(g, z, s, h, |a| {
+            let e = 1.0 / (1.0 + (-a).exp());
+            e * (1.0 - e)
+        }),
+    }
+}
+
+/// Elements per block of the row sums: `f32` lanes within a block, `f64` across blocks.
+const BLOCK: usize = 1024;
+const LANES: usize = 16;
+
+/// `(sum_t g[t], sum_t g[t] (z[t] - m))`, vectorisable (independent lanes).
+#[inline(always)]
+fn dot_dev(g: &[f32], z: &[f32], m: f32) -> (f64, f64) {
+    let (mut t1, mut t2) = (0.0f64, 0.0f64);
+    for (gb, zb) in g.chunks(BLOCK).zip(z.chunks(BLOCK)) {
+        let (mut s1, mut s2) = ([0.0f32; LANES], [0.0f32; LANES]);
+        let (gc, zc) = (gb.chunks_exact(LANES), zb.chunks_exact(LANES));
+        let (gr, zr) = (gc.remainder(), zc.remainder());
+        for (x, y) in gc.zip(zc) {
+            for i in 0..LANES {
+                s1[i] += x[i];
+                s2[i] += x[i] * (y[i] - m);
+            }
+        }
+        let mut b1: f32 = s1.iter().sum();
+        let mut b2: f32 = s2.iter().sum();
+        for (x, y) in gr.iter().zip(zr) {
+            b1 += x;
+            b2 += x * (y - m);
+        }
+        t1 += f64::from(b1);
+        t2 += f64::from(b2);
+    }
+    (t1, t2)
+}
+
+/// `(sum_t (z[t] - k), sum_t (z[t] - k)^2)`, vectorisable.
+#[inline(always)]
+fn sum_dev(z: &[f32], k: f32) -> (f64, f64) {
+    let (mut t1, mut t2) = (0.0f64, 0.0f64);
+    for zb in z.chunks(BLOCK) {
+        let (mut s1, mut s2) = ([0.0f32; LANES], [0.0f32; LANES]);
+        let zc = zb.chunks_exact(LANES);
+        let zr = zc.remainder();
+        for x in zc {
+            for i in 0..LANES {
+                let d = x[i] - k;
+                s1[i] += d;
+                s2[i] += d * d;
+            }
+        }
+        let mut b1: f32 = s1.iter().sum();
+        let mut b2: f32 = s2.iter().sum();
+        for x in zr {
+            let d = x - k;
+            b1 += d;
+            b2 += d * d;
+        }
+        t1 += f64::from(b1);
+        t2 += f64::from(b2);
+    }
+    (t1, t2)
+}
+
+/// Sizes of the part after the convolution: an optional instance norm over each
+/// `(sample, channel)` row of `len` pixels (with `gamma`, `beta`, ones and zeros when it is
+/// not affine), then the activation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct PostDims {
+    pub batch: usize,
+    pub channels: usize,
+    pub len: usize,
+    /// The norm's epsilon; `None` for no norm.
+    pub norm: Option<f64>,
+    pub act: Activation,
+}
+
+/// Per row, the forward map's `a = z scale + shift` (the activation's input) and the
+/// norm's `mean`, `rstd` (`0`, `1` without a norm).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct RowStats {
+    pub mean: Vec<f32>,
+    pub rstd: Vec<f32>,
+}
+
+impl RowStats {
+    /// `(scale, shift)` of row `row`.
+    fn map(&self, row: usize, gamma: &[f32], beta: &[f32], d: &PostDims) -> (f32, f32) {
+        if d.norm.is_none() {
+            return (1.0, 0.0);
+        }
+        let c = row % d.channels;
+        let s = self.rstd[row] * gamma[c];
+        (s, beta[c] - self.mean[row] * s)
+    }
+}
+
+/// `act(InstanceNorm(z))` (or `act(z)` without a norm) and the per-row statistics.
+///
+/// # Shapes
+/// - `z`: `[B, C, len]`; `gamma`, `beta`: `[C]`
+/// - output: `[B, C, len]`
+pub(crate) fn post_forward(
+    z: &[f32],
+    gamma: &[f32],
+    beta: &[f32],
+    d: PostDims,
+) -> (Vec<f32>, RowStats) {
+    let rows = d.batch * d.channels;
+    assert_eq!(z.len(), rows * d.len, "post_forward: z");
+    let len = d.len.max(1);
+    let arch = Arch::new();
+    let (mean, rstd): (Vec<f32>, Vec<f32>) = match d.norm {
+        // Moments about the row's first value (a shift near the mean keeps the variance
+        // `E[(z - k)^2] - E[z - k]^2` accurate).
+        Some(eps) => z
+            .par_chunks_exact(len)
+            .map(|r| {
+                let n = r.len() as f64;
+                let k = r[0];
+                let (s1, s2) = arch.dispatch(|| sum_dev(r, k));
+                let d1 = s1 / n;
+                let var = (s2 / n - d1 * d1).max(0.0);
+                (
+                    (f64::from(k) + d1) as f32,
+                    (1.0 / (var + eps).sqrt()) as f32,
+                )
+            })
+            .unzip(),
+        None => (vec![0.0; rows], vec![1.0; rows]),
+    };
+    let stats = RowStats { mean, rstd };
+    let mut y = vec![0.0f32; z.len()];
+    y.par_chunks_exact_mut(len)
+        .zip(z.par_chunks_exact(len))
+        .enumerate()
+        .for_each(|(row, (yr, zr))| {
+            let (s, h) = stats.map(row, gamma, beta, &d);
+            arch.dispatch(|| map_row(yr, zr, s, h, d.act));
+        });
+    (y, stats)
+}
+
+/// The backward pass of [`post_forward`] in place: `grad` holds the output gradient on
+/// entry and `dz` on return; returns `[dbias, dgamma, dbeta]` (`dbias` is `sum dz` per
+/// channel, the gradient of a bias added to `z`: zero under a norm, which a per-channel
+/// constant does not change).
+///
+/// With `xhat = (z - mean) rstd`, `a = xhat gamma + beta`, `ga = gy act'(a)`, per row
+/// `A = sum ga`, `B = sum ga xhat`: `dz = rstd gamma (ga - A / n - xhat B / n)`,
+/// `dgamma = sum B`, `dbeta = sum A`.
+///
+/// # Shapes
+/// - `grad`, `z`: `[B, C, len]`; `gamma`, `beta`: `[C]`
+/// - output: three `[C]`
+pub(crate) fn post_backward_in_place(
+    grad: &mut [f32],
+    z: &[f32],
+    gamma: &[f32],
+    beta: &[f32],
+    stats: &RowStats,
+    d: PostDims,
+) -> [Vec<f32>; 3] {
+    let rows = d.batch * d.channels;
+    assert_eq!(grad.len(), rows * d.len, "post_backward: gy");
+    assert_eq!(z.len(), rows * d.len, "post_backward: z");
+    let len = d.len.max(1);
+    let n = d.len as f64;
+    let arch = Arch::new();
+    // Per row (sum ga, sum ga xhat, sum dz).
+    let sums: Vec<(f64, f64, f64)> = grad
+        .par_chunks_exact_mut(len)
+        .zip(z.par_chunks_exact(len))
+        .enumerate()
+        .map(|(row, (g, zr))| {
+            let (s, h) = stats.map(row, gamma, beta, &d);
+            arch.dispatch(|| {
+                grad_row(g, zr, s, h, d.act);
+                if d.norm.is_none() {
+                    let (total, _) = dot_dev(g, zr, 0.0);
+                    return (0.0, 0.0, total);
+                }
+                let (m, r) = (stats.mean[row], stats.rstd[row]);
+                let (sa, sgd) = dot_dev(g, zr, m);
+                let sb = f64::from(r) * sgd;
+                let p = r * gamma[row % d.channels];
+                let (ma, mb) = ((sa / n) as f32, (sb / n) as f32);
+                // dz = p (ga - ma - (z - m) r mb) = p ga + q z + c.
+                let q = -p * r * mb;
+                let c = -p * (ma - m * r * mb);
+                for (g, &z) in g.iter_mut().zip(zr.iter()) {
+                    *g = p * *g + q * z + c;
+                }
+                // A norm is blind to a constant added to its row: sum dz = 0 exactly.
+                (sa, sb, 0.0)
+            })
+        })
+        .collect();
+    let mut out = [
+        vec![0.0f32; d.channels],
+        vec![0.0f32; d.channels],
+        vec![0.0f32; d.channels],
+    ];
+    let mut acc = vec![(0.0f64, 0.0f64, 0.0f64); d.channels];
+    for (row, &(a, b, s)) in sums.iter().enumerate() {
+        let e = &mut acc[row % d.channels];
+        e.0 += a;
+        e.1 += b;
+        e.2 += s;
+    }
+    for (c, &(a, b, s)) in acc.iter().enumerate() {
+        out[0][c] = s as f32;
+        out[1][c] = b as f32;
+        out[2][c] = a as f32;
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn values(n: usize, seed: u64) -> Vec<f32> {
+        let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        (0..n)
+            .map(|_| {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+            })
+            .collect()
+    }
+
+    fn close(a: &[f32], b: &[f32], tol: f32, what: &str) {
+        assert_eq!(a.len(), b.len(), "{what}");
+        for (i, (x, y)) in a.iter().zip(b).enumerate() {
+            assert!(
+                (x - y).abs() <= tol * y.abs().max(1.0),
+                "{what} [{i}]: {x} vs {y}"
+            );
+        }
+    }
+
+    /// The convolution as the textbook loop nest, in f64.
+    fn conv_naive(x: &[f32], w: &[f32], bias: &[f32], d: Conv2dDims) -> Vec<f32> {
+        let [oh, ow] = d.out_size().unwrap();
+        let [h, wd] = d.size;
+        let [kh, kw] = d.kernel;
+        let mut z = vec![0.0; d.batch * d.c_out * oh * ow];
+        for b in 0..d.batch {
+            for o in 0..d.c_out {
+                for y in 0..oh {
+                    for xo in 0..ow {
+                        let mut s = bias.get(o).map_or(0.0, |&v| f64::from(v));
+                        for c in 0..d.c_in {
+                            for i in 0..kh {
+                                for j in 0..kw {
+                                    let iy = (y * d.stride[0] + i) as isize - d.padding[0] as isize;
+                                    let ix =
+                                        (xo * d.stride[1] + j) as isize - d.padding[1] as isize;
+                                    if (0..h as isize).contains(&iy)
+                                        && (0..wd as isize).contains(&ix)
+                                    {
+                                        s += f64::from(w[((o * d.c_in + c) * kh + i) * kw + j])
+                                            * f64::from(
+                                                x[((b * d.c_in + c) * h + iy as usize) * wd
+                                                    + ix as usize],
+                                            );
+                                    }
+                                }
+                            }
+                        }
+                        z[((b * d.c_out + o) * oh + y) * ow + xo] = s as f32;
+                    }
+                }
+            }
+        }
+        z
+    }
+
+    fn dims(
+        batch: usize,
+        c_in: usize,
+        c_out: usize,
+        size: [usize; 2],
+        kernel: usize,
+        stride: usize,
+        padding: usize,
+    ) -> Conv2dDims {
+        Conv2dDims {
+            batch,
+            c_in,
+            c_out,
+            size,
+            kernel: [kernel; 2],
+            stride: [stride; 2],
+            padding: [padding; 2],
+        }
+    }
+
+    /// Forward against the naive loops (with tiles that end mid-row: a wide patch makes
+    /// the tile `MIN_TILE` pixels); both gradients against the naive convolution's
+    /// gradient, probed with one-hot inputs, and the adjoint identities.
+    #[test]
+    fn conv2d_kernels_match_naive_loops() {
+        let cases = [
+            dims(2, 3, 5, [9, 7], 4, 2, 1),
+            dims(1, 4, 3, [8, 8], 4, 2, 0),
+            dims(2, 3, 4, [5, 6], 3, 1, 0),
+            dims(1, 2, 3, [7, 5], 3, 1, 1),
+            dims(3, 5, 2, [3, 4], 1, 1, 0),
+            dims(1, 1, 2, [4, 4], 4, 2, 0),
+            // 48 patch rows at 64 x 64: several tiles, one ending inside an output row.
+            dims(1, 3, 2, [128, 90], 4, 2, 1),
+            dims(2, 300, 2, [13, 11], 3, 1, 1),
+        ];
+        for d in cases {
+            let x = values(d.batch * d.c_in * d.plane(), 1);
+            let w = values(d.c_out * d.patch(), 2);
+            let bias = values(d.c_out, 3);
+            let z = conv2d_forward(&x, &w, &bias, d);
+            close(&z, &conv_naive(&x, &w, &bias, d), 1e-4, "forward");
+            let g = values(z.len(), 4);
+            let (dx, dw) = conv2d_backward(&g, &x, &w, d, true, true);
+            let (dx, dw) = (dx.unwrap(), dw.unwrap());
+            let dot = |a: &[f32], b: &[f32]| -> f64 {
+                a.iter()
+                    .zip(b)
+                    .map(|(a, b)| f64::from(*a) * f64::from(*b))
+                    .sum()
+            };
+            let zg = dot(&conv_naive(&x, &w, &[], d), &g);
+            assert!(
+                (dot(&x, &dx) - zg).abs() < 1e-3 * zg.abs().max(1.0),
+                "dx {d:?}"
+            );
+            assert!(
+                (dot(&w, &dw) - zg).abs() < 1e-3 * zg.abs().max(1.0),
+                "dw {d:?}"
+            );
+            for probe in [0, x.len() / 3, x.len() - 1] {
+                let mut e = vec![0.0; x.len()];
+                e[probe] = 1.0;
+                let expect = dot(&conv_naive(&e, &w, &[], d), &g);
+                assert!(
+                    (f64::from(dx[probe]) - expect).abs() < 1e-4,
+                    "dx[{probe}] {d:?}"
+                );
+            }
+            for probe in [0, w.len() / 2, w.len() - 1] {
+                let mut e = vec![0.0; w.len()];
+                e[probe] = 1.0;
+                let expect = dot(&conv_naive(&x, &e, &[], d), &g);
+                assert!(
+                    (f64::from(dw[probe]) - expect).abs() < 1e-3 * expect.abs().max(1.0),
+                    "dw[{probe}] {d:?}: {} vs {expect}",
+                    dw[probe]
+                );
+            }
+            // Only one of the two asked for.
+            let (none, only_w) = conv2d_backward(&g, &x, &w, d, false, true);
+            assert!(none.is_none());
+            close(&only_w.unwrap(), &dw, 1e-6, "dw alone");
+        }
+    }
+
+    #[test]
+    fn valid_ranges() {
+        // stride 2, offset -1, size 8: inputs 2u - 1 in [0, 8) for u in [1, 5).
+        assert_eq!(valid(0, 6, 2, -1, 8), (1, 5));
+        assert_eq!(valid(0, 4, 2, -1, 8), (1, 4));
+        assert_eq!(valid(2, 4, 2, -1, 8), (0, 3));
+        assert_eq!(valid(0, 3, 1, 5, 4), (0, 0));
+        assert_eq!(valid(0, 3, 1, -9, 4), (3, 3));
+    }
+
+    /// Instance norm + each activation against an f64 evaluation, and the backward pass
+    /// against central finite differences of `sum(y gy)`.
+    #[test]
+    fn norm_activation_matches_definition_and_finite_differences() {
+        for act in [
+            Activation::Identity,
+            Activation::Relu,
+            Activation::LeakyRelu(0.2),
+            Activation::Sigmoid,
+        ] {
+            for norm in [Some(1e-5), None] {
+                let d = PostDims {
+                    batch: 2,
+                    channels: 3,
+                    len: 11,
+                    norm,
+                    act,
+                };
+                let n = d.batch * d.channels * d.len;
+                let z: Vec<f32> = values(n, 5).iter().map(|v| v * 2.0 + 0.3).collect();
+                let gamma: Vec<f32> = values(3, 6).iter().map(|v| v + 1.2).collect();
+                let beta = values(3, 7);
+                let gy = values(n, 8);
+                let f = |a: f64| match act {
+                    Activation::Identity => a,
+                    Activation::Relu => a.max(0.0),
+                    Activation::LeakyRelu(s) => {
+                        if a >= 0.0 {
+                            a
+                        } else {
+                            a * s
+                        }
+                    }
+                    Activation::Sigmoid => 1.0 / (1.0 + (-a).exp()),
+                };
+                let reference = |z: &[f64], gamma: &[f64], beta: &[f64]| -> Vec<f64> {
+                    let mut y = vec![0.0; n];
+                    for row in 0..d.batch * d.channels {
+                        let r = &z[row * d.len..(row + 1) * d.len];
+                        let c = row % d.channels;
+                        let m = r.iter().sum::<f64>() / d.len as f64;
+                        let v = r.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / d.len as f64;
+                        for t in 0..d.len {
+                            let a = match norm {
+                                Some(eps) => (r[t] - m) / (v + eps).sqrt() * gamma[c] + beta[c],
+                                None => r[t],
+                            };
+                            y[row * d.len + t] = f(a);
+                        }
+                    }
+                    y
+                };
+                let f64s = |v: &[f32]| v.iter().map(|&x| f64::from(x)).collect::<Vec<_>>();
+                let (zd, gd, bd) = (f64s(&z), f64s(&gamma), f64s(&beta));
+                let (y, stats) = post_forward(&z, &gamma, &beta, d);
+                let yr: Vec<f32> = reference(&zd, &gd, &bd).iter().map(|&v| v as f32).collect();
+                close(&y, &yr, 1e-5, "y");
+                let mut dz = gy.clone();
+                let [dbias, dgamma, dbeta] =
+                    post_backward_in_place(&mut dz, &z, &gamma, &beta, &stats, d);
+                let loss = |y: Vec<f64>| -> f64 {
+                    y.iter().zip(&gy).map(|(y, g)| y * f64::from(*g)).sum()
+                };
+                let h = 1e-6;
+                let fd = |which: usize, i: usize| -> f64 {
+                    let mut args = [zd.clone(), gd.clone(), bd.clone()];
+                    args[which][i] += h;
+                    let up = loss(reference(&args[0], &args[1], &args[2]));
+                    args[which][i] -= 2.0 * h;
+                    let down = loss(reference(&args[0], &args[1], &args[2]));
+                    (up - down) / (2.0 * h)
+                };
+                for i in [0, 5, 27, n - 1] {
+                    let e = fd(0, i);
+                    assert!(
+                        (f64::from(dz[i]) - e).abs() < 2e-4,
+                        "{act:?} {norm:?} dz[{i}] {} vs {e}",
+                        dz[i]
+                    );
+                }
+                for c in 0..3 {
+                    // A bias on z moves every element of its channel's rows.
+                    let e: f64 = (0..d.batch)
+                        .flat_map(|b| (0..d.len).map(move |t| ((b * 3 + c) * d.len) + t))
+                        .map(|i| fd(0, i))
+                        .sum();
+                    assert!((f64::from(dbias[c]) - e).abs() < 1e-3, "{act:?} dbias[{c}]");
+                    if norm.is_some() {
+                        for (which, got) in [(1, &dgamma), (2, &dbeta)] {
+                            let e = fd(which, c);
+                            assert!(
+                                (f64::from(got[c]) - e).abs() < 2e-4,
+                                "{act:?} arg {which} [{c}]: {} vs {e}",
+                                got[c]
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
