@@ -28,7 +28,7 @@ use clap::{Parser, Subcommand};
 /// mimalloc instead of the system allocator: a training step allocates and frees many
 /// multi-megabyte tensor buffers, and glibc's `malloc` serves each from fresh `mmap` pages
 /// (a page fault per 4 KiB touched) and unmaps it on free. mimalloc keeps freed segments for
-/// reuse: on the quick preset that removed 85 % of the page faults (docs/training.md, Speed).
+/// reuse, as glibc does when told to (measured in the README, Networks).
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
