@@ -1002,33 +1002,31 @@ pub fn claims(s: &Summary) -> Vec<String> {
         let tex = |m: Method, f: fn(&TexelErrors) -> Option<f64>| {
             get(m).and_then(|x| Some((f(&x.texture_gain_fitted)?, f(&x.texture)?)))
         };
-        if let (Some(b), Some(h)) = (
-            tex(Method::Bitt, |t| t.not_visible),
-            tex(Method::HarpLike, |t| t.not_visible),
-        ) {
-            out.push(format!(
-                "{}: BiTT reconstructs the sides the camera did not see better than HARP-like (gain-fitted texel L1 {:.4} vs {:.4}; raw {:.4} vs {:.4}): {}.",
-                setting.key(),
-                b.0,
-                h.0,
-                b.1,
-                h.1,
-                verdict(b.0 < h.0)
-            ));
-        }
-        if let (Some(b), Some(h)) = (
-            tex(Method::Bitt, |t| t.symmetric),
-            tex(Method::Html, |t| t.symmetric),
-        ) {
-            out.push(format!(
-                "{}: BiTT fills the texels seen only on the other hand better than its coarse stage HTML, through the layout's symmetry (gain-fitted texel L1 {:.4} vs {:.4}; raw {:.4} vs {:.4}): {}.",
-                setting.key(),
-                b.0,
-                h.0,
-                b.1,
-                h.1,
-                verdict(b.0 < h.0)
-            ));
+        type TexelClass = fn(&TexelErrors) -> Option<f64>;
+        let texture_claims: [(Method, TexelClass, &str); 2] = [
+            (
+                Method::HarpLike,
+                |t| t.not_visible,
+                "BiTT reconstructs the sides the camera did not see better than HARP-like",
+            ),
+            (
+                Method::Html,
+                |t| t.symmetric,
+                "BiTT fills the texels seen only on the other hand better than its coarse stage HTML, through the layout's symmetry",
+            ),
+        ];
+        for (other, class, claim) in texture_claims {
+            if let (Some(b), Some(h)) = (tex(Method::Bitt, class), tex(other, class)) {
+                out.push(format!(
+                    "{}: {claim} (gain-fitted texel L1 {:.4} vs {:.4}; raw {:.4} vs {:.4}): {}.",
+                    setting.key(),
+                    b.0,
+                    h.0,
+                    b.1,
+                    h.1,
+                    verdict(b.0 < h.0)
+                ));
+            }
         }
         // The paper's Table 1a: HARP fits the input view best (appearance reconstruction).
         // Judged on the input view's image, not on texels: a directly optimised texture

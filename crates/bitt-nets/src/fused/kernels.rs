@@ -642,28 +642,7 @@ pub(crate) fn norm_silu_backward_in_place(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn values(n: usize, seed: u64) -> Vec<f32> {
-        let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
-        (0..n)
-            .map(|_| {
-                s ^= s << 13;
-                s ^= s >> 7;
-                s ^= s << 17;
-                ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-            })
-            .collect()
-    }
-
-    fn close(a: &[f32], b: &[f32], tol: f32, what: &str) {
-        assert_eq!(a.len(), b.len(), "{what}");
-        for (i, (x, y)) in a.iter().zip(b).enumerate() {
-            assert!(
-                (x - y).abs() <= tol * y.abs().max(1.0),
-                "{what} [{i}]: {x} vs {y}"
-            );
-        }
-    }
+    use crate::fused::test_values::{close, values};
 
     /// The convolution as the textbook triple loop.
     fn conv_naive(x: &[f32], w: &[f32], d: ConvDims) -> Vec<f32> {
