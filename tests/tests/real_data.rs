@@ -281,7 +281,7 @@ fn annotation_run_trains_resumes_and_renders_in_other_poses() {
     assert_eq!(resumed.history.len(), 3);
     assert_eq!(resumed.history[2].total, straight.trainer.history[2].total);
     // The run folder, written as for synthetic runs minus ground-truth scores.
-    let summary = bitt::run::write_run(&run, &resumed, None, 2).unwrap();
+    let summary = bitt::run::write_run(&run, &resumed, None, 2, &[]).unwrap();
     assert!(summary.synthetic.is_none());
     for f in [
         "report.html",
@@ -513,7 +513,7 @@ fn mano_and_html_folders_train_with_the_html_prior() {
     )
     .unwrap();
     setup.input.write(&run, &setup.scene).unwrap();
-    bitt::run::write_run(&run, &setup.trainer, None, 0).unwrap();
+    bitt::run::write_run(&run, &setup.trainer, None, 0, &[]).unwrap();
     let avatar = RealAvatar::load(&run).unwrap();
     assert_eq!(avatar.input.hands, hands.absolute());
     let assets = avatar.assets().unwrap();

@@ -18,9 +18,13 @@
 //! - `slurm-check [--work DIR] [--bitt PATH]`: the sharded evaluation as a Slurm job array on a
 //!   one-node cluster started here (installs slurm-wlm and munge; not part of CI), compared
 //!   with a single-process run; see `docs/slurm-check.md`.
+//! - `check-clients [--run DIR] [--iterations N] [--screenshot PNG] [--chromium PATH]`: a run's
+//!   outputs opened headless in the programs people view them with (Chromium: the report's 3D
+//!   view); not part of CI; see `docs/clients.md`.
 
 mod bench;
 mod bench_render;
+mod check_clients;
 mod fuzz;
 mod nets;
 mod slurm;
@@ -389,14 +393,14 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some((cmd, rest)) = args.split_first() else {
         bail!(
-            "usage: cargo xtask <demo|test|e2e|train-scene|render-avatar|eval|eval-merge|metrics|convert-lpips|pose-hands|convert-mano|texture|convert-html|render|synth|fuzz|bench> [ARGS]"
+            "usage: cargo xtask <demo|test|e2e|train-scene|render-avatar|export|eval|eval-merge|metrics|convert-lpips|pose-hands|convert-mano|texture|convert-html|render|synth|fuzz|bench|check-clients> [ARGS]"
         );
     };
     match cmd.as_str() {
         "demo" => bitt(&[&["demo".to_string()], rest].concat()),
         "pose-hands" | "convert-mano" | "texture" | "convert-html" | "render" | "train-scene"
         | "render-avatar" | "synth" | "eval" | "eval-merge" | "metrics" | "convert-lpips"
-        | "refine-hands" | "fit-hands" => bitt(&args),
+        | "refine-hands" | "fit-hands" | "export" => bitt(&args),
         "test" => {
             let status = cargo()
                 .args(["test", "--workspace", "--release"])
@@ -416,6 +420,7 @@ fn main() -> Result<()> {
         "nets" => nets::nets(rest),
         "bench" => bench::bench(rest),
         "slurm-check" => slurm::slurm_check(rest),
+        "check-clients" => check_clients::check_clients(rest),
         other => {
             bail!("unknown command `{other}`; try demo, test, e2e, pose-hands, convert-mano, fuzz")
         }

@@ -3,11 +3,13 @@
 //! The binary is the only place that picks a burn device and touches the command line;
 //! everything else lives in the library crates (see ARCHITECTURE.md).
 
+mod avatar_pose;
 mod backend_check;
 mod bench_render;
 mod demo;
 mod device;
 mod eval;
+mod export;
 mod fit_hands;
 mod metrics;
 mod nets;
@@ -102,6 +104,10 @@ enum Command {
     FitHands(fit_hands::FitHandsArgs),
     /// Render a trained run's avatar at another view (`--view AZ,EL`), pose or light.
     RenderAvatar(render_avatar::RenderAvatarArgs),
+    /// Write a trained run's avatar again without retraining: rigged glTF (default, with the
+    /// clip of the scene's novel poses), `--static` glTF or `--format obj`, in the training
+    /// pose or another (`--pose`, `--procedural-pose`).
+    Export(export::ExportArgs),
     /// Time the renderer's stages forward and backward (JSON; `cargo xtask bench render`).
     BenchRender(bench_render::BenchRenderArgs),
     /// Mean and largest absolute difference of two images (JSON; `cargo xtask e2e`).
@@ -151,6 +157,7 @@ fn main() -> Result<()> {
         Command::Synth(args) => synth::run(&args),
         Command::TrainScene(args) => train_scene::run(&args),
         Command::RenderAvatar(args) => render_avatar::run(&args),
+        Command::Export(args) => export::run(&args),
         Command::RefineHands(args) => refine_hands::run(&args),
         Command::FitHands(args) => fit_hands::run(&args),
         Command::Eval(args) => eval::run(&args),

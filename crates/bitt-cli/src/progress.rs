@@ -13,6 +13,8 @@ pub(crate) struct ProgressLine {
     terminal: bool,
     /// End the line on a terminal when the last step is shown.
     newline_at_end: bool,
+    /// Which lines a log has had.
+    log: LogLines,
 }
 
 impl ProgressLine {
@@ -23,6 +25,7 @@ impl ProgressLine {
             started: Instant::now(),
             terminal: std::io::stderr().is_terminal(),
             newline_at_end: true,
+            log: LogLines::default(),
         }
     }
 
@@ -53,7 +56,7 @@ impl ProgressLine {
             if self.newline_at_end && done == total {
                 eprintln!();
             }
-        } else if plain_line_due(done, total) {
+        } else if self.log.due(done, total) {
             eprintln!("{line}");
         }
         let _ = std::io::stderr().flush();
@@ -93,23 +96,128 @@ impl bitt_texture::FitProgress for PcaFitBar {
     }
 }
 
-/// Whether a log gets a line at step `done` of `total`: the first, the last, and each step
-/// that crosses another tenth.
-fn plain_line_due(done: usize, total: usize) -> bool {
+/// The tenth of the work that `done` of `total` has reached (0 to 10; `total` 0 counts as 1,
+/// `done` past `total` as `total`).
+fn tenth(done: usize, total: usize) -> usize {
     let total = total.max(1);
-    done <= 1 || done >= total || 10 * done / total != 10 * (done - 1) / total
+    // u128: `10 * done` cannot overflow.
+    (10 * done.min(total) as u128 / total as u128) as usize
+}
+
+/// Whether a log gets a line at `done` of `total`, given the tenth its last line was at
+/// (`None`: no line yet for this total): the first report, then whenever the work reaches a
+/// tenth not printed yet (so at most 11 lines, the last at `done == total`). Steps that are
+/// skipped or reported twice neither hide a tenth nor repeat one. Returns the tenth to
+/// remember.
+fn plain_line_due(done: usize, total: usize, last: Option<usize>) -> Option<usize> {
+    let now = tenth(done, total);
+    match last {
+        Some(last) if now <= last => None,
+        _ => Some(now),
+    }
+}
+
+/// The lines a log has had of one progress line: the total and the tenth of the last one. A
+/// new total (the keypoint fit's plan grows with each restart) starts a new count.
+#[derive(Debug, Default, Clone, Copy, PartialEq)]
+struct LogLines {
+    last: Option<(usize, usize)>,
+}
+
+impl LogLines {
+    /// Whether `done` of `total` gets a line; remembers it if so.
+    fn due(&mut self, done: usize, total: usize) -> bool {
+        let last = self
+            .last
+            .filter(|&(t, _)| t == total)
+            .map(|(_, tenth)| tenth);
+        match plain_line_due(done, total, last) {
+            Some(tenth) => {
+                self.last = Some((total, tenth));
+                true
+            }
+            None => false,
+        }
+    }
 }
 
 #[cfg(test)]
 mod tests {
-    use super::plain_line_due;
+    use super::{LogLines, plain_line_due};
+
+    /// The reports of `steps` that a log prints.
+    fn logged(steps: impl IntoIterator<Item = (usize, usize)>) -> Vec<(usize, usize)> {
+        let mut log = LogLines::default();
+        steps
+            .into_iter()
+            .filter(|&(done, total)| log.due(done, total))
+            .collect()
+    }
+
+    #[test]
+    fn the_decision_follows_the_last_printed_tenth() {
+        // Nothing printed yet: always print, and remember the tenth reached.
+        assert_eq!(plain_line_due(1, 200, None), Some(0));
+        assert_eq!(plain_line_due(0, 5, None), Some(0));
+        assert_eq!(plain_line_due(301, 700, None), Some(4));
+        // Within the tenth already printed: nothing.
+        assert_eq!(plain_line_due(19, 200, Some(0)), None);
+        assert_eq!(plain_line_due(20, 200, Some(1)), None);
+        // A new tenth, however many steps were skipped to reach it.
+        assert_eq!(plain_line_due(20, 200, Some(0)), Some(1));
+        assert_eq!(plain_line_due(95, 200, Some(1)), Some(4));
+        // The end is its own tenth; past the end counts as the end; a zero total is one.
+        assert_eq!(plain_line_due(200, 200, Some(9)), Some(10));
+        assert_eq!(plain_line_due(200, 200, Some(10)), None);
+        assert_eq!(plain_line_due(250, 200, Some(9)), Some(10));
+        assert_eq!(plain_line_due(1, 0, None), Some(10));
+        assert_eq!(plain_line_due(usize::MAX, usize::MAX, Some(9)), Some(10));
+    }
 
     #[test]
     fn a_log_gets_a_line_every_tenth() {
-        let due: Vec<usize> = (1..=200).filter(|&i| plain_line_due(i, 200)).collect();
-        assert_eq!(due, vec![1, 20, 40, 60, 80, 100, 120, 140, 160, 180, 200]);
-        let due: Vec<usize> = (1..=7).filter(|&i| plain_line_due(i, 7)).collect();
-        assert_eq!(due, vec![1, 2, 3, 4, 5, 6, 7]);
-        assert!(plain_line_due(1, 0));
+        let done = |lines: Vec<(usize, usize)>| lines.iter().map(|l| l.0).collect::<Vec<_>>();
+        // A 200-iteration run: 11 lines instead of 200 redraws.
+        let lines = logged((1..=200).map(|i| (i, 200)));
+        assert_eq!(
+            done(lines),
+            vec![1, 20, 40, 60, 80, 100, 120, 140, 160, 180, 200]
+        );
+        // Fewer steps than tenths: every step.
+        assert_eq!(
+            done(logged((1..=7).map(|i| (i, 7)))),
+            vec![1, 2, 3, 4, 5, 6, 7]
+        );
+        // A PCA stage reports 0 first; a one-step stage gets its start and its end.
+        assert_eq!(done(logged((0..=1).map(|i| (i, 1)))), vec![0, 1]);
+        // A resumed run starts with a line, then continues at the next tenth.
+        assert_eq!(
+            done(logged((301..=700).map(|i| (i, 700)))),
+            vec![301, 350, 420, 490, 560, 630, 700]
+        );
+        // Reports every 7 steps still get one line per tenth, the end included.
+        assert_eq!(
+            done(logged((7..=100).step_by(7).chain([100]).map(|i| (i, 100)))),
+            vec![7, 14, 21, 35, 42, 56, 63, 70, 84, 91, 100]
+        );
+        // A repeated report is not printed twice.
+        assert_eq!(
+            logged([(50, 100), (50, 100), (100, 100), (100, 100)]).len(),
+            2
+        );
+        // A total that grows (the keypoint fit's restarts) starts a new count at once.
+        let lines = logged(
+            (1..=150)
+                .map(|i| (i, 150))
+                .chain((151..=300).map(|i| (i, 300))),
+        );
+        assert_eq!(
+            lines
+                .iter()
+                .filter(|l| l.1 == 300)
+                .map(|l| l.0)
+                .collect::<Vec<_>>(),
+            vec![151, 180, 210, 240, 270, 300]
+        );
     }
 }

@@ -17,14 +17,11 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use bitt::evaluate::move_light;
-use bitt::real::{
-    RealAvatar, RealInput, annotation_pose, orbit_hands, parse_pose_family, procedural_pose,
-    render_textures,
-};
-use bitt::run::SavedAvatar;
-use bitt_mesh::{HandPair, PinholeCamera, Side, TwoHandScene, procedural_pair};
-use bitt_render::scene::LightValues;
+use bitt::real::orbit_hands;
+use bitt::saved::SavedRun;
+use bitt_mesh::PinholeCamera;
 
+use crate::avatar_pose::OtherPoseArgs;
 use crate::device::DeviceName;
 use crate::render::parse_light;
 
@@ -40,17 +37,9 @@ pub struct RenderAvatarArgs {
     /// Pose the hands as novel pose K of the run's scene (default: the training pose).
     #[arg(long, conflicts_with_all = ["pose", "procedural_pose"])]
     pub novel_pose: Option<usize>,
-    /// Pose the hands as in another BiTT annotation pickle (the demo `NN.pkl` layout), seen
-    /// by its camera cropped around the hands like a training view.
-    #[arg(long, conflicts_with = "procedural_pose")]
-    pub pose: Option<PathBuf>,
-    /// Pose the hands in a named pose of the synthetic generator: clasp, interlaced,
-    /// palm_on_back, palm_over_palm, side_by_side, finger_gun, pinch, fist_in_palm, prayer.
-    #[arg(long)]
-    pub procedural_pose: Option<String>,
-    /// Seed of the procedural pose's jitter.
-    #[arg(long, default_value_t = 0, requires = "procedural_pose")]
-    pub pose_seed: u64,
+    /// Another pose (default: the training pose).
+    #[command(flatten)]
+    pub other_pose: OtherPoseArgs,
     /// Light as JSON or a JSON file (`{"ambient": [r,g,b], "diffuse": .., "specular": ..,
     /// "location": [x,y,z]}`, camera frame of the rendered view). Default: the run's
     /// estimated light, fixed in the world; with --pose / --procedural-pose, placed relative
@@ -85,102 +74,6 @@ fn parse_view(s: &str) -> Result<(f64, f64), String> {
     Ok((a, e))
 }
 
-/// A saved avatar of either kind of run.
-enum Saved {
-    Synthetic(Box<SavedAvatar>),
-    Real(Box<RealAvatar>, Box<bitt::assets::HandAssets>),
-}
-
-impl Saved {
-    fn load(dir: &std::path::Path) -> Result<Self> {
-        let context = || format!("--run {}: not a complete train-scene run", dir.display());
-        Ok(if RealInput::is_real_run(dir) {
-            let avatar = RealAvatar::load(dir).with_context(context)?;
-            let assets = avatar.assets().with_context(|| {
-                format!(
-                    "--run {}: the hand models the run was trained with",
-                    dir.display()
-                )
-            })?;
-            Saved::Real(Box::new(avatar), Box::new(assets))
-        } else {
-            Saved::Synthetic(Box::new(SavedAvatar::load(dir).with_context(context)?))
-        })
-    }
-
-    fn models(&self) -> HandPair {
-        match self {
-            Saved::Synthetic(_) => procedural_pair(),
-            Saved::Real(_, assets) => assets.models.clone(),
-        }
-    }
-
-    fn image_size(&self) -> usize {
-        match self {
-            Saved::Synthetic(a) => a.config.nets.image_size,
-            Saved::Real(a, _) => a.config.nets.image_size,
-        }
-    }
-
-    /// The training pose with the training camera.
-    fn training(&self) -> TwoHandScene {
-        match self {
-            Saved::Synthetic(a) => TwoHandScene {
-                camera: a.camera,
-                ..a.scene.given.clone()
-            },
-            Saved::Real(a, _) => a.input.train.hands.clone(),
-        }
-    }
-
-    fn camera(&self) -> PinholeCamera {
-        match self {
-            Saved::Synthetic(a) => a.camera,
-            Saved::Real(a, _) => a.camera(),
-        }
-    }
-
-    fn light(&self) -> LightValues {
-        match self {
-            Saved::Synthetic(a) => a.light,
-            Saved::Real(a, _) => a.light,
-        }
-    }
-
-    /// Novel pose `k` of the run's scene; synthetic novel poses are seen from the training
-    /// camera, real ones (InterHand2.6M) from their own camera.
-    fn novel_pose(&self, k: usize) -> Result<TwoHandScene> {
-        match self {
-            Saved::Synthetic(a) => Ok(a.view(Some(k), 0.0, 0.0)?),
-            Saved::Real(a, _) => {
-                let poses = &a.input.novel_poses;
-                if poses.is_empty() {
-                    bail!(
-                        "--novel-pose {k}: this run was trained from a single annotation and \
-                         has no novel poses; use --pose PKL or --procedural-pose NAME"
-                    );
-                }
-                let p = poses.get(k).with_context(|| {
-                    format!("--novel-pose {k}: the run has {} novel poses", poses.len())
-                })?;
-                Ok(p.hands.clone())
-            }
-        }
-    }
-
-    fn render(
-        &self,
-        hands: &TwoHandScene,
-        light: &LightValues,
-        device: &burn::tensor::Device,
-    ) -> Result<Vec<f32>> {
-        Ok(match self {
-            Saved::Synthetic(a) => a.render(hands, Some(light), device)?,
-            Saved::Real(a, assets) => render_textures(assets, &a.fine, hands, light, device)?,
-        })
-    }
-}
-
 /// `camera` with its intrinsics scaled to a `size x size` image.
 fn resized(camera: &PinholeCamera, size: u32) -> Result<PinholeCamera> {
     if !(8..=4096).contains(&size) {
@@ -211,33 +104,19 @@ pub fn run(args: &RenderAvatarArgs) -> Result<()> {
         bail!("--out {}: must be a .png file", args.out.display());
     }
     let user_light = args.light.as_deref().map(parse_light).transpose()?;
-    let family = args
-        .procedural_pose
-        .as_deref()
-        .map(parse_pose_family)
-        .transpose()
-        .context("--procedural-pose")?;
-    let saved = Saved::load(&args.run)?;
+    args.other_pose.check()?;
+    let saved = SavedRun::load(&args.run)?;
     let device = args.device.device()?;
     let models = saved.models();
-    let size = saved.image_size();
     // The pose and whether the estimated light stays fixed in the training camera's world.
     let (base, same_world) = if let Some(k) = args.novel_pose {
-        (saved.novel_pose(k)?, true)
-    } else if let Some(path) = &args.pose {
-        let hands = annotation_pose(path, &models, size)
-            .with_context(|| format!("--pose {}", path.display()))?;
-        (hands, false)
-    } else if let Some(family) = family {
-        let training = saved.training();
-        let betas = |side: Side| {
-            training
-                .hand(side)
-                .map(|h| h.betas.clone())
-                .unwrap_or_else(|| vec![0.0; bitt_mesh::model::NUM_BETAS])
-        };
-        let (l, r) = (betas(Side::Left), betas(Side::Right));
-        let hands = procedural_pose(&models, family, [&l, &r], args.pose_seed, size)?;
+        let hands = saved.novel_pose(k).with_context(|| {
+            format!(
+                "--novel-pose {k}; --pose PKL and --procedural-pose NAME pose the avatar otherwise"
+            )
+        })?;
+        (hands, true)
+    } else if let Some(hands) = args.other_pose.hands(&saved)? {
         (hands, false)
     } else {
         (saved.training(), true)

@@ -962,7 +962,11 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
         Input::Synthetic(scene) => Some(scene.as_ref()),
         Input::Real(..) => None,
     };
-    let summary = write_run(&out, &trainer, synthetic, args.turntable)?;
+    let clip = match &input {
+        Input::Synthetic(scene) => bitt::run::novel_pose_clip(scene),
+        Input::Real(_, scene) => scene.novel_poses.iter().map(|p| p.hands.clone()).collect(),
+    };
+    let summary = write_run(&out, &trainer, synthetic, args.turntable, &clip)?;
     let real_scores = match &input {
         Input::Real(_, scene)
             if !(scene.novel_views.is_empty() && scene.novel_poses.is_empty()) =>
@@ -1055,6 +1059,12 @@ mod tests {
     struct AvatarCli {
         #[command(flatten)]
         args: crate::render_avatar::RenderAvatarArgs,
+    }
+
+    #[derive(Debug, Parser)]
+    struct ExportCli {
+        #[command(flatten)]
+        args: crate::export::ExportArgs,
     }
 
     fn args(extra: &[&str]) -> TrainSceneArgs {
@@ -1337,6 +1347,53 @@ mod tests {
             render(&["--procedural-pose", "wave"], "bad.png").unwrap_err()
         );
         assert!(e.contains("wave") && e.contains("clasp"), "{e}");
+        // export: rigged (the run's avatar.glb again), static, OBJ, another pose.
+        let export = |extra: &[&str]| {
+            let mut all = vec!["bitt", "--run", s(&out)];
+            all.extend_from_slice(extra);
+            crate::export::run(&ExportCli::try_parse_from(all).unwrap().args)
+        };
+        let rigged = dir.join("again.glb");
+        export(&["--out", s(&rigged)]).unwrap();
+        assert_eq!(
+            std::fs::read(&rigged).unwrap(),
+            std::fs::read(out.join("avatar.glb")).unwrap(),
+            "re-exporting gives the run's own avatar"
+        );
+        let fixed = dir.join("static.glb");
+        export(&["--static", "--out", s(&fixed)]).unwrap();
+        assert_eq!(
+            std::fs::read(&fixed).unwrap(),
+            std::fs::read(out.join("avatar_static.glb")).unwrap()
+        );
+        let obj = dir.join("hands.obj");
+        export(&["--format", "obj", "--out", s(&obj)]).unwrap();
+        for f in [
+            "hands.obj",
+            "hands.mtl",
+            "hands_left_hand.png",
+            "hands_right_hand.png",
+        ] {
+            assert!(dir.join(f).is_file(), "{f}");
+        }
+        let posed = dir.join("posed.glb");
+        export(&["--procedural-pose", "clasp", "--out", s(&posed)]).unwrap();
+        assert_ne!(
+            std::fs::read(&posed).unwrap(),
+            std::fs::read(&rigged).unwrap()
+        );
+        let e = format!(
+            "{:#}",
+            export(&["--out", s(&dir.join("x.obj"))]).unwrap_err()
+        );
+        assert!(e.contains("x.obj") && e.contains(".glb"), "{e}");
+        assert!(!dir.join("x.obj").exists());
+        let not_a_run = ExportCli::try_parse_from(["bitt", "--run", s(&dir), "--out", "y.glb"]);
+        let e = format!(
+            "{:#}",
+            crate::export::run(&not_a_run.unwrap().args).unwrap_err()
+        );
+        assert!(e.contains("not a complete train-scene run"), "{e}");
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -41,6 +41,26 @@ pub const MANO_PARENTS: [Option<usize>; NUM_JOINTS] = [
     Some(14),
 ];
 
+/// Names of the 16 skeleton joints in MANO's order (the rigged avatar's bone names, after
+/// the hand: `right_index1`, ...).
+pub const JOINT_NAMES: [&str; NUM_JOINTS] = [
+    "wrist", "index1", "index2", "index3", "middle1", "middle2", "middle3", "pinky1", "pinky2",
+    "pinky3", "ring1", "ring2", "ring3", "thumb1", "thumb2", "thumb3",
+];
+
+/// Names of the fingertip leaf joints, in the order of [`HandModel::fingertips`].
+pub const FINGERTIP_NAMES: [&str; 5] = [
+    "thumb_tip",
+    "index_tip",
+    "middle_tip",
+    "ring_tip",
+    "pinky_tip",
+];
+
+/// The skeleton joint each fingertip hangs from (the finger's last joint), in the order of
+/// [`HandModel::fingertips`].
+pub const FINGERTIP_PARENTS: [usize; 5] = [15, 3, 6, 12, 9];
+
 /// Which hand a model describes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]

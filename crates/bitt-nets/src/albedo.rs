@@ -297,7 +297,8 @@ mod tests {
 
     use super::*;
     use crate::fused::conv2d::without_fusion;
-    use crate::test_util::{assert_all_close, assert_close, param_grads, random, to_vec};
+    use crate::test_util::{assert_all_close, assert_same_as_flex, param_grads};
+    use bitt_testkit::{assert_close, random, to_vec};
 
     /// The network as the reference writes it, in burn layers: activations, norms and
     /// upsampling as separate operations, the up-convolutions at the high resolution.
@@ -379,16 +380,12 @@ mod tests {
         }
     }
 
-    /// On another backend the network composes burn's layers and computes the same values
-    /// as on flex.
+    /// On another backend (ndarray, wgpu) the network composes burn's layers and computes the
+    /// same values as on flex.
     #[test]
-    #[allow(deprecated)] // burn-ndarray, see `test_util::devices`
-    fn albedo_on_ndarray_equals_flex() {
+    fn albedo_off_flex_equals_flex() {
         let net = small().init(&Device::flex());
         let image = random([1, 3, 32, 32], 23, &Device::flex());
-        let on_flex = to_vec(net.forward(image.clone()));
-        let nd = Device::ndarray();
-        let on_nd = net.to_device(&nd).forward(image.to_device(&nd));
-        assert_close(&to_vec(on_nd), &on_flex, 1e-5, "albedo ndarray vs flex");
+        assert_same_as_flex(&net, &image, |n, x| n.forward(x), 1e-5, "albedo");
     }
 }

@@ -358,7 +358,7 @@ pub fn compose_texels(coarse: Tensor<3>, unwrapped: Tensor<3>, visible: Tensor<3
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_util::{assert_close, devices, random, to_vec};
+    use bitt_testkit::{assert_close, devices, random, to_vec};
 
     fn tiny(bidirectional: bool) -> BtrConfig {
         BtrConfig::new()

@@ -165,7 +165,7 @@ impl TexelConv {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_util::{assert_close, devices, random, to_vec};
+    use bitt_testkit::{assert_close, devices, random, to_vec};
 
     /// Values and gradients (input, weight, bias) of the matmul forms equal burn's conv1d.
     #[test]

@@ -129,7 +129,7 @@ mod tests {
     use burn::tensor::Device;
 
     use super::*;
-    use crate::test_util::{assert_close, random, to_vec};
+    use bitt_testkit::{assert_close, devices, random, to_vec};
 
     /// One test case: `[batch, c_in, c_out]`, input size, kernel, stride, padding, bias,
     /// norm (`Some(affine)`), activation.
@@ -264,21 +264,22 @@ mod tests {
         }
     }
 
-    /// On another backend the operation declines and the block is burn's composition; the
-    /// same parameters give the same values as flex's operation.
+    /// On another backend (ndarray, wgpu) the operation declines and the block is burn's
+    /// composition; the same parameters give the same values as flex's operation.
     #[test]
-    #[allow(deprecated)] // burn-ndarray, see `test_util::devices`
     fn fused_conv2d_declines_off_flex() {
-        for device in [Device::ndarray(), Device::ndarray().autodiff()] {
-            for case in &CASES {
-                let (conv, norm) = layers(case, &device);
-                let x = input(case, &device);
-                assert!(fused(&conv, norm.as_ref(), case.7, &x).is_none());
-                let y = conv_norm_act(&conv, norm.as_ref(), case.7, x.clone());
-                let flex = Device::flex();
-                let (conv_f, norm_f) = layers(case, &flex);
-                let yf = conv_norm_act(&conv_f, norm_f.as_ref(), case.7, input(case, &flex));
-                assert_close(&to_vec(y), &to_vec(yf), 1e-4, &format!("{case:?}"));
+        for (name, plain) in devices().into_iter().filter(|(n, _)| *n != "flex") {
+            for device in [plain.clone(), plain.autodiff()] {
+                for case in &CASES {
+                    let (conv, norm) = layers(case, &device);
+                    let x = input(case, &device);
+                    assert!(fused(&conv, norm.as_ref(), case.7, &x).is_none(), "{name}");
+                    let y = conv_norm_act(&conv, norm.as_ref(), case.7, x.clone());
+                    let flex = Device::flex();
+                    let (conv_f, norm_f) = layers(case, &flex);
+                    let yf = conv_norm_act(&conv_f, norm_f.as_ref(), case.7, input(case, &flex));
+                    assert_close(&to_vec(y), &to_vec(yf), 1e-4, &format!("{name} {case:?}"));
+                }
             }
         }
     }

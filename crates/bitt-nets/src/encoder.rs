@@ -139,11 +139,11 @@ mod tests {
     }
 
     /// With the custom operation on flex: the values, the input's and every parameter's
-    /// gradient of burn's layers; on ndarray the same values through burn's layers.
+    /// gradient of burn's layers; on ndarray and wgpu the same values through burn's layers.
     #[test]
-    #[allow(deprecated)] // burn-ndarray, see `test_util::devices`
     fn encoder_matches_burn_layers_with_gradients() {
-        use crate::test_util::{assert_all_close, assert_close, param_grads, random, to_vec};
+        use crate::test_util::{assert_all_close, assert_same_as_flex, param_grads};
+        use bitt_testkit::{assert_close, random, to_vec};
         let device = Device::flex().autodiff();
         let e = ConvEncoderConfig::new(7, 32, 4).init(&device);
         let image = random([3, 3, 32, 32], 31, &device).require_grad();
@@ -173,9 +173,6 @@ mod tests {
         let flex = Device::flex();
         let e = ConvEncoderConfig::new(7, 32, 4).init(&flex);
         let image = random([2, 3, 32, 32], 33, &flex);
-        let on_flex = to_vec(e.forward(image.clone()));
-        let nd = Device::ndarray();
-        let on_nd = to_vec(e.to_device(&nd).forward(image.to_device(&nd)));
-        assert_close(&on_nd, &on_flex, 1e-5, "encoder ndarray vs flex");
+        assert_same_as_flex(&e, &image, |e, x| e.forward(x), 1e-5, "encoder");
     }
 }

@@ -131,7 +131,7 @@ impl LightParams {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_util::{assert_close, to_vec};
+    use bitt_testkit::{assert_close, to_vec};
 
     #[test]
     fn mapping_puts_each_value_in_its_range() {

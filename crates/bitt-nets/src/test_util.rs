@@ -1,45 +1,7 @@
-//! Helpers shared by this crate's unit tests.
+//! Helpers shared by this crate's unit tests beyond the workspace's kit (`bitt-testkit`).
 
-use burn::tensor::{Device, Tensor, TensorData};
-
-/// The CPU devices every numeric test runs on.
-#[allow(deprecated)] // burn-ndarray is deprecated but still a supported backend here
-pub(crate) fn devices() -> Vec<(&'static str, Device)> {
-    vec![("flex", Device::flex()), ("ndarray", Device::ndarray())]
-}
-
-/// A tensor's values as `f32`.
-pub(crate) fn to_vec<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.into_data().try_to_vec::<f32>().expect("tensor readback")
-}
-
-/// Deterministic values in `[-1, 1)` (SplitMix64), the same bits on every backend.
-pub(crate) fn random<const D: usize>(shape: [usize; D], seed: u64, device: &Device) -> Tensor<D> {
-    let n = shape.iter().product();
-    let mut state = seed.wrapping_mul(0x2545_F491_4F6C_DD1D);
-    let values: Vec<f32> = (0..n)
-        .map(|_| {
-            state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = state;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            z ^= z >> 31;
-            2.0 * ((z >> 40) as f32 / (1u64 << 24) as f32) - 1.0
-        })
-        .collect();
-    Tensor::from_data(TensorData::new(values, shape), device)
-}
-
-/// Element-wise `|a - b| <= tol * max(1, |b|)`.
-pub(crate) fn assert_close(a: &[f32], b: &[f32], tol: f32, what: &str) {
-    assert_eq!(a.len(), b.len(), "{what}: lengths differ");
-    for (i, (&x, &y)) in a.iter().zip(b).enumerate() {
-        assert!(
-            (x - y).abs() <= tol * y.abs().max(1.0),
-            "{what}: value {i}: {x} vs {y} (tol {tol})"
-        );
-    }
-}
+use bitt_testkit::{assert_close, devices, to_vec};
+use burn::tensor::Tensor;
 
 /// Every float parameter's gradient, in visiting order (empty where there is none).
 pub(crate) fn param_grads<M: burn::module::Module>(
@@ -70,5 +32,29 @@ pub(crate) fn assert_all_close(a: &[Vec<f32>], b: &[Vec<f32>], tol: f32, what: &
     for (i, (x, y)) in a.iter().zip(b).enumerate() {
         assert!(!y.is_empty(), "{what}: parameter {i} has no gradient");
         assert_close(x, y, tol, &format!("{what}: parameter {i}"));
+    }
+}
+
+/// `forward(module, input)` on every backend but flex (ndarray, wgpu: burn's layers) equals
+/// its value on flex, where `module` and `input` live, within `tol`.
+pub(crate) fn assert_same_as_flex<M: burn::module::Module, const D: usize, const E: usize>(
+    module: &M,
+    input: &Tensor<D>,
+    forward: impl Fn(M, Tensor<D>) -> Tensor<E>,
+    tol: f32,
+    what: &str,
+) {
+    let on_flex = to_vec(forward(module.clone(), input.clone()));
+    for (name, device) in devices().into_iter().filter(|(n, _)| *n != "flex") {
+        let out = forward(
+            module.clone().to_device(&device),
+            input.clone().to_device(&device),
+        );
+        assert_close(
+            &to_vec(out),
+            &on_flex,
+            tol,
+            &format!("{what} {name} vs flex"),
+        );
     }
 }

@@ -4,8 +4,8 @@
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
 
-use crate::test_util::{devices, random};
 use crate::{BittNetsConfig, LightParams, Preset};
+use bitt_testkit::{devices, random};
 
 /// The parameter counts of the reference implementation (PyTorch), exactly.
 #[test]

@@ -10,7 +10,6 @@ use std::collections::HashMap;
 use crate::error::PickleErrorKind;
 use crate::machine::{Class, H, Machine, Obj, TensorSpec, latin1};
 use crate::numpy::{self, shape_str};
-use crate::torch;
 use crate::value::{ArrayData, CscMatrix, NdArray, Value};
 
 /// Deepest nesting of containers (and chumpy / scipy objects) accepted.
@@ -194,7 +193,7 @@ impl<'m, 'a> Converter<'m, 'a> {
             })?;
         let count = numpy::element_count(&spec.shape).map_err(|k| (self.offset(h), k))?;
         self.charge(h, count)?;
-        torch::tensor_data(
+        crate::storage::tensor_data(
             *dtype,
             bytes,
             *numel,

@@ -42,6 +42,7 @@ mod convert;
 mod error;
 mod machine;
 mod numpy;
+mod storage;
 mod torch;
 mod value;
 

@@ -11,7 +11,7 @@ use std::rc::Rc;
 
 use crate::error::PickleErrorKind;
 use crate::numpy::{self, Dtype};
-use crate::torch::TorchDtype;
+use crate::storage::TorchDtype;
 
 type R<T> = Result<T, PickleErrorKind>;
 

@@ -18,7 +18,7 @@
 //! exactly like unclipped ones (the barycentrics at a pixel do not depend on clipping).
 //! Gradients from pixels entering or leaving coverage (silhouette terms) are not produced.
 
-use crate::error::{RenderError, check_faces, check_fragments, check_len, check_positions};
+use crate::error::{RenderError, check_faces, check_len, check_positions};
 use crate::raster::Fragments;
 
 /// Gradient of a scalar loss w.r.t. the clip positions, given `dL/d(bary)` per pixel and
@@ -41,7 +41,7 @@ pub fn rasterize_backward(
 ) -> Result<Vec<[f32; 4]>, RenderError> {
     check_positions(clip)?;
     check_faces(faces, clip.len())?;
-    let n = check_fragments(frags, faces.len())?;
+    let n = crate::raster::check_fragments(frags, faces.len())?;
     check_len("grad_bary", grad_bary.len(), n)?;
     if let Some(gd) = grad_depth {
         check_len("grad_depth", gd.len(), n)?;

@@ -1,7 +1,5 @@
 //! Error type and shared input validation.
 
-use crate::raster::Fragments;
-
 /// Largest supported image side, in pixels.
 pub const MAX_IMAGE_SIDE: usize = 1 << 24;
 
@@ -177,22 +175,4 @@ pub(crate) fn check_len(
             actual,
         })
     }
-}
-
-/// Checks a [`Fragments`] buffer's shape and face ids; returns the pixel count.
-pub(crate) fn check_fragments(frags: &Fragments, num_faces: usize) -> Result<usize, RenderError> {
-    let n = check_image(frags.width, frags.height)?;
-    check_len("fragments.face", frags.face.len(), n)?;
-    check_len("fragments.bary", frags.bary.len(), n)?;
-    check_len("fragments.depth", frags.depth.len(), n)?;
-    for (pixel, &face) in frags.face.iter().enumerate() {
-        if face < -1 || (face >= 0 && face as usize >= num_faces) {
-            return Err(RenderError::InvalidFragmentFace {
-                pixel,
-                face,
-                num_faces,
-            });
-        }
-    }
-    Ok(n)
 }

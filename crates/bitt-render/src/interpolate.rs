@@ -1,6 +1,6 @@
 //! Per-pixel attribute interpolation and its backward pass.
 
-use crate::error::{RenderError, check_faces, check_fragments, check_len};
+use crate::error::{RenderError, check_faces, check_len};
 use crate::raster::Fragments;
 
 /// Validates the attribute layout; returns the number of vertices.
@@ -28,7 +28,7 @@ pub fn interpolate(
 ) -> Result<Vec<f32>, RenderError> {
     let num_vertices = check_attrs(attrs, num_attrs)?;
     check_faces(faces, num_vertices)?;
-    let n = check_fragments(frags, faces.len())?;
+    let n = crate::raster::check_fragments(frags, faces.len())?;
     let a = num_attrs;
     let mut out = vec![0.0f32; n * a];
     for (pixel, &f) in frags.face.iter().enumerate() {
@@ -59,7 +59,7 @@ pub fn interpolate_backward(
 ) -> Result<(Vec<f32>, Vec<[f32; 3]>), RenderError> {
     let num_vertices = check_attrs(attrs, num_attrs)?;
     check_faces(faces, num_vertices)?;
-    let n = check_fragments(frags, faces.len())?;
+    let n = crate::raster::check_fragments(frags, faces.len())?;
     let a = num_attrs;
     check_len("grad_out", grad_out.len(), n * a)?;
     let mut grad_attrs = vec![0.0f32; attrs.len()];

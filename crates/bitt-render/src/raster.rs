@@ -1,7 +1,7 @@
 //! Forward rasterization: triangle setup in fixed point, top-left fill rule, z-buffer.
 
 use crate::clip::{ClipVertex, clip_triangle};
-use crate::error::{RenderError, check_faces, check_image, check_positions};
+use crate::error::{RenderError, check_faces, check_image, check_len, check_positions};
 
 /// Sub-pixel precision of the snapped vertex positions used for coverage (1/65536 px).
 const SUBPIXEL_BITS: u32 = 16;
@@ -218,4 +218,22 @@ fn perspective(v: &[ScreenVertex; 3], screen: [f64; 3]) -> Option<([f64; 3], f64
     let depth = z / w;
     let finite = depth.is_finite() && bary.iter().all(|b| b.is_finite());
     (finite && depth <= 1.0).then_some((bary, depth))
+}
+
+/// Checks a [`Fragments`] buffer's shape and face ids; returns the pixel count.
+pub(crate) fn check_fragments(frags: &Fragments, num_faces: usize) -> Result<usize, RenderError> {
+    let n = check_image(frags.width, frags.height)?;
+    check_len("fragments.face", frags.face.len(), n)?;
+    check_len("fragments.bary", frags.bary.len(), n)?;
+    check_len("fragments.depth", frags.depth.len(), n)?;
+    for (pixel, &face) in frags.face.iter().enumerate() {
+        if face < -1 || (face >= 0 && face as usize >= num_faces) {
+            return Err(RenderError::InvalidFragmentFace {
+                pixel,
+                face,
+                num_faces,
+            });
+        }
+    }
+    Ok(n)
 }

@@ -238,7 +238,9 @@ pub fn load_compact_texture(path: &Path, layout: &TextureLayout) -> Result<Vec<f
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_util::{Rng, temp_dir};
+    use bitt_testkit::Rng;
+
+    use crate::test_util::temp_dir;
 
     /// A JPEG cut in half decodes without an error (the decoder fills the rest with grey), so
     /// it is refused by its missing end-of-image marker; the whole file still reads.
@@ -271,7 +273,7 @@ mod tests {
 
     fn pattern(w: usize, h: usize, seed: u64) -> Vec<f32> {
         let mut r = Rng::new(seed);
-        (0..3 * w * h).map(|_| r.uniform(0.0, 1.0)).collect()
+        (0..3 * w * h).map(|_| r.uniform_f32(0.0, 1.0)).collect()
     }
 
     #[test]

@@ -583,7 +583,7 @@ fn closest_barycentric(p: [DVec2; 3], q: DVec2) -> [f64; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_util::{assert_close, devices, to_vec};
+    use bitt_testkit::{assert_close, devices, to_vec};
 
     /// Two triangles: the unit square split along its diagonal, covering a 5x5 texture
     /// completely, and a small triangle in a corner of an 8x8 texture.
@@ -649,10 +649,10 @@ mod tests {
         }
         // Texel (8, 0) is UV vertex 0 of face 0: barycentrics (1, 0, 0).
         let t = l.compact_index(8, 0).unwrap();
-        assert_close(&faces[t].1, &[1.0, 0.0, 0.0], 1e-6);
+        assert_close(&faces[t].1, &[1.0, 0.0, 0.0], 1e-6, "barycentrics");
         // Texel (6, 1): u = 1/8, v = 2/8 -> b1 = u / 0.5, b2 = v / 0.5.
         let t = l.compact_index(6, 1).unwrap();
-        assert_close(&faces[t].1, &[0.25, 0.25, 0.5], 1e-6);
+        assert_close(&faces[t].1, &[0.25, 0.25, 0.5], 1e-6, "barycentrics");
         assert_eq!(l.compact_index(0, 0), None);
         assert_eq!(l.compact_index(9, 0), None);
         let mask = l.mask_image();
@@ -691,11 +691,11 @@ mod tests {
         // vertex, barycentrics (0, 0, 1).
         let t = l1.compact_index(3, 0).unwrap();
         assert_eq!(faces[t].0, 0);
-        assert_close(&faces[t].1, &[0.0, 0.0, 1.0], 1e-6);
+        assert_close(&faces[t].1, &[0.0, 0.0, 1.0], 1e-6, "gutter barycentrics");
         // (3, 6) is left of chart 2's texel (2, 6) (UV vertex 3): face 1, vertex 3.
         let t = l1.compact_index(3, 6).unwrap();
         assert_eq!(faces[t].0, 1);
-        assert_close(&faces[t].1, &[1.0, 0.0, 0.0], 1e-6);
+        assert_close(&faces[t].1, &[1.0, 0.0, 0.0], 1e-6, "barycentrics");
         // (5, 2), i.e. (x, y) = (2, 5), lies beyond chart 1's hypotenuse y = x + 4; its
         // nearest chart texel is (5, 1).
         let t = l1.compact_index(5, 2).unwrap();
@@ -703,7 +703,12 @@ mod tests {
         let b = faces[t].1;
         assert!(b[0].abs() < 1e-6, "{b:?}");
         // Closest point on the edge from (4, 8) to (0, 4) to (2, 5) is (1.5, 5.5).
-        assert_close(&b, &[0.0, 1.5 / 4.0, 2.5 / 4.0], 1e-6);
+        assert_close(
+            &b,
+            &[0.0, 1.5 / 4.0, 2.5 / 4.0],
+            1e-6,
+            "clamped barycentrics",
+        );
     }
 
     #[test]
@@ -850,7 +855,7 @@ mod tests {
             let grads = loss.backward();
             let g = c.grad(&grads).expect("gradient");
             assert_eq!(g.dims(), [3, 6], "{name}");
-            assert_close(&to_vec(g), &want, 1e-6);
+            assert_close(&to_vec(g), &want, 1e-6, name);
         }
     }
 }

@@ -3,8 +3,9 @@
 //! BiTT's coarse texture is HTML, a PCA model `T(a) = mean + basis a` over the compact vector
 //! of a UV map's valid texels; its fine stage (BTR) works on the same compact vector for both
 //! hands. This crate owns that representation: layouts ([`layout`]), PCA models ([`pca`]),
-//! the HTML loaders ([`html`]), the project's own procedural skin model ([`procedural`]) and
-//! texture images on disk ([`image_io`]). It knows nothing about networks or rendering.
+//! the HTML loaders ([`html`]), the project's own procedural skin model ([`procedural`]),
+//! PCA models resampled onto another layout ([`resample`]) and texture images on disk
+//! ([`image_io`]). It knows nothing about networks or rendering.
 
 pub mod error;
 pub mod html;
@@ -12,6 +13,7 @@ pub mod image_io;
 pub mod layout;
 pub mod pca;
 pub mod procedural;
+pub mod resample;
 mod st;
 
 pub use error::TextureError;

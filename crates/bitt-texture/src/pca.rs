@@ -901,7 +901,9 @@ fn cholesky_solve_factored(l: &[f64], b: &[f64], k: usize) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_util::{Recorder, Rng, assert_close, devices, on_threads, temp_dir, to_vec};
+    use bitt_testkit::{Rng, assert_close, devices, to_vec};
+
+    use crate::test_util::{Recorder, on_threads, temp_dir};
 
     /// A 6x5 layout with 12 texels in a scattered order, and a random model with colours
     /// comfortably inside (0, 1) for parameters in [-1, 1].
@@ -923,8 +925,10 @@ mod tests {
         let layout = TextureLayout::from_texels(6, 5, texels, None).unwrap();
         let n = 3 * layout.num_texels();
         let mut r = Rng::new(seed);
-        let mean = (0..n).map(|_| r.uniform(0.4, 0.6) / scale).collect();
-        let basis = (0..n * k).map(|_| r.uniform(-0.05, 0.05) / scale).collect();
+        let mean = (0..n).map(|_| r.uniform_f32(0.4, 0.6) / scale).collect();
+        let basis = (0..n * k)
+            .map(|_| r.uniform_f32(-0.05, 0.05) / scale)
+            .collect();
         TexturePca::new(layout, mean, basis, k, scale).unwrap()
     }
 
@@ -948,7 +952,7 @@ mod tests {
         let a = [0.5f32, -1.0, 0.25, 0.8];
         let a64: Vec<f64> = a.iter().map(|&x| f64::from(x)).collect();
         let want: Vec<f32> = direct(&m, &a64).iter().map(|&x| x as f32).collect();
-        assert_close(&m.texture(&a).unwrap(), &want, 1e-6);
+        assert_close(&m.texture(&a).unwrap(), &want, 1e-6, "texture");
         // Huge parameters clip to [0, 1].
         let tex = m.texture(&[1e4, -1e4, 1e4, 0.0]).unwrap();
         assert!(tex.iter().all(|&x| (0.0..=1.0).contains(&x)));
@@ -1029,12 +1033,12 @@ mod tests {
             let pt = m.to_device(&device);
             let ta = pt.texture(Tensor::from_data(TensorData::new(a.to_vec(), [4]), &device));
             assert_eq!(ta.dims(), [3, 12], "{name}");
-            assert_close(&to_vec(ta), &plain_a, 1e-5);
+            assert_close(&to_vec(ta), &plain_a, 1e-5, name);
             let ab: Vec<f32> = a.iter().chain(&b).copied().collect();
             let tb = pt.textures(Tensor::from_data(TensorData::new(ab, [2, 4]), &device));
             assert_eq!(tb.dims(), [2, 3, 12], "{name}");
             let both: Vec<f32> = plain_a.iter().chain(&plain_b).copied().collect();
-            assert_close(&to_vec(tb), &both, 1e-5);
+            assert_close(&to_vec(tb), &both, 1e-5, name);
         }
     }
 
@@ -1046,7 +1050,7 @@ mod tests {
         let (w_img, h_img) = (m.layout.width, m.layout.height);
         let mut r = Rng::new(9);
         let weights: Vec<f32> = (0..3 * w_img * h_img)
-            .map(|_| r.uniform(-1.0, 1.0))
+            .map(|_| r.uniform_f32(-1.0, 1.0))
             .collect();
         let bg = [0.2f32, 0.4, 0.6];
         // The same loss in f64 on the plain path (no clamping happens at these values).
@@ -1103,7 +1107,7 @@ mod tests {
             assert!((f64::from(got_loss) - loss64(&a)).abs() < 1e-4, "{name}");
             let grads = loss.backward();
             let g = params.grad(&grads).expect("parameter gradient");
-            assert_close(&to_vec(g), &want, 1e-3);
+            assert_close(&to_vec(g), &want, 1e-3, name);
         }
     }
 
@@ -1115,15 +1119,20 @@ mod tests {
             let tex = m.texture(&a).unwrap();
             let mask: Vec<bool> = (0..12).map(|t| t % 2 == 0).collect();
             let got = m.project(&tex, Some(&mask), 0.0).unwrap();
-            assert_close(&got, &a, 1e-3);
+            assert_close(&got, &a, 1e-3, "masked projection");
             let all = m.project(&tex, None, 0.0).unwrap();
-            assert_close(&all, &a, 1e-3);
+            assert_close(&all, &a, 1e-3, "projection");
             // Texels outside the mask do not matter.
             let mut spoiled = tex.clone();
             for c in 0..3 {
                 spoiled[c * 12 + 1] = 0.0;
             }
-            assert_close(&m.project(&spoiled, Some(&mask), 0.0).unwrap(), &a, 1e-3);
+            assert_close(
+                &m.project(&spoiled, Some(&mask), 0.0).unwrap(),
+                &a,
+                1e-3,
+                "masked-out texels ignored",
+            );
             // A ridge shrinks the estimate towards the mean.
             let shrunk = m.project(&tex, Some(&mask), 1.0).unwrap();
             let norm = |v: &[f32]| v.iter().map(|x| x * x).sum::<f32>();
@@ -1141,7 +1150,7 @@ mod tests {
         let mut r = Rng::new(seed + 100);
         let samples = (0..n)
             .map(|_| {
-                let z: Vec<f32> = (0..3).map(|_| r.uniform(-2.0, 2.0)).collect();
+                let z: Vec<f32> = (0..3).map(|_| r.uniform_f32(-2.0, 2.0)).collect();
                 (0..d)
                     .map(|i| m.mean[i] + (0..3).map(|j| z[j] * dirs[j][i]).sum::<f32>())
                     .collect()
@@ -1226,7 +1235,7 @@ mod tests {
                 );
             }
             for (s, p) in samples.iter().zip(&params) {
-                assert_close(&m.texture(p).unwrap(), s, 1e-4);
+                assert_close(&m.texture(p).unwrap(), s, 1e-4, name);
             }
             // Each column's largest entry is positive.
             for j in 0..3 {
@@ -1348,7 +1357,7 @@ mod tests {
         let mut r = Rng::new(seed + 7);
         for s in &mut samples {
             for x in s.iter_mut() {
-                *x += r.uniform(-0.02, 0.02);
+                *x += r.uniform_f32(-0.02, 0.02);
             }
         }
         (layout, samples)
@@ -1479,8 +1488,8 @@ mod tests {
         let mut r = Rng::new(11);
         let with_uv = TexturePca::new(
             layout,
-            (0..n).map(|_| r.uniform(0.0, 1.0)).collect(),
-            (0..2 * n).map(|_| r.uniform(-1.0, 1.0)).collect(),
+            (0..n).map(|_| r.uniform_f32(0.0, 1.0)).collect(),
+            (0..2 * n).map(|_| r.uniform_f32(-1.0, 1.0)).collect(),
             2,
             1.0,
         )

@@ -1,51 +1,8 @@
-//! Helpers shared by this crate's unit tests.
+//! Helpers shared by this crate's unit tests beyond the workspace's kit (`bitt-testkit`).
 
 use std::sync::Mutex;
 
-use burn::tensor::{Device, Tensor};
-
 use crate::pca::{FitProgress, FitStage};
-
-/// The CPU devices every numeric test runs on.
-#[allow(deprecated)] // burn-ndarray is deprecated but still a supported backend here
-pub(crate) fn devices() -> Vec<(&'static str, Device)> {
-    vec![("flex", Device::flex()), ("ndarray", Device::ndarray())]
-}
-
-/// A tensor's values as `f32`.
-pub(crate) fn to_vec<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    crate::pca::read(t).expect("tensor readback")
-}
-
-/// Element-wise `|a - b| <= tol * max(1, |b|)`.
-pub(crate) fn assert_close(a: &[f32], b: &[f32], tol: f32) {
-    assert_eq!(a.len(), b.len(), "lengths differ");
-    for (i, (&x, &y)) in a.iter().zip(b).enumerate() {
-        assert!(
-            (x - y).abs() <= tol * y.abs().max(1.0),
-            "value {i}: {x} vs {y} (tol {tol})\n{a:?}\n{b:?}"
-        );
-    }
-}
-
-/// A deterministic generator (SplitMix64) for test data.
-pub(crate) struct Rng(u64);
-
-impl Rng {
-    pub(crate) fn new(seed: u64) -> Self {
-        Rng(seed)
-    }
-
-    /// Uniform in `[lo, hi)`.
-    pub(crate) fn uniform(&mut self, lo: f32, hi: f32) -> f32 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        lo + (hi - lo) * ((z >> 40) as f32 / (1u64 << 24) as f32)
-    }
-}
 
 /// A fresh empty folder for one test's files.
 pub(crate) fn temp_dir(name: &str) -> std::path::PathBuf {

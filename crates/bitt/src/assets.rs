@@ -106,6 +106,9 @@ pub struct ViewGeometry {
     pub vertices_host: [Vec<DVec3>; 2],
     /// The same as `[V, 3]` tensors.
     pub vertices: [Tensor<2>; 2],
+    /// The hands' parameters and camera the vertices were posed from, when they were (not
+    /// for a view made from vertices alone).
+    pub hands: Option<TwoHandScene>,
     /// The render geometry made so far (see the type's docs).
     cache: GeometryCache,
 }
@@ -142,7 +145,10 @@ impl ViewGeometry {
             translation: DVec3::ZERO,
             ..*c
         });
-        Ok(Self::from_vertices(camera, *c, host, device))
+        Ok(ViewGeometry {
+            hands: Some(scene.clone()),
+            ..Self::from_vertices(camera, *c, host, device)
+        })
     }
 
     /// A view of camera-frame vertices (left, right) seen by `camera` (identity
@@ -162,6 +168,7 @@ impl ViewGeometry {
             scene_camera,
             vertices_host,
             vertices,
+            hands: None,
             cache: GeometryCache::default(),
         }
     }

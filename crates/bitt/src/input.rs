@@ -1,13 +1,19 @@
 //! Bringing an input image of any size to the preset's square size: crop a square around
-//! both hands, resize, and adjust the camera intrinsics to match.
+//! both hands (the reference's crop around their projected box), resize, and adjust the
+//! camera intrinsics to match.
 
-use bitt_mesh::PinholeCamera;
+use std::path::Path;
+
 use bitt_mesh::glam::{DMat3, DVec3};
+use bitt_mesh::{HandPair, PinholeCamera, TwoHandScene};
 
 use crate::BittError;
 
 /// Margin around the hands' pixel box, as a fraction of its larger side.
 pub const CROP_MARGIN: f64 = 0.15;
+
+/// The reference's `HAND_BBOX_RATIO`: the hands' box fills this fraction of the crop's side.
+pub const REFERENCE_HAND_BOX_RATIO: f64 = 0.8;
 
 /// An image `[3, H, W]` (channel-major, values in `[0, 1]`) with its camera and optional mask
 /// `[H, W]`.
@@ -86,6 +92,57 @@ pub fn fit_camera(
     }
     let (x0, y0, side) = square_window([h, w], hands_box, size)?;
     crop_camera(camera, x0, y0, side, size)
+}
+
+/// The pixel box `[x0, y0, x1, y1]` of both hands' projected vertices (either hand alone when
+/// only one is annotated).
+pub fn hands_box(hands: &TwoHandScene, models: &HandPair) -> Result<[f64; 4], BittError> {
+    let posed = hands.pose_in_camera(models)?;
+    let points: Vec<DVec3> = [posed.left, posed.right]
+        .into_iter()
+        .flatten()
+        .flat_map(|h| h.vertices)
+        .collect();
+    let b = hands
+        .pixel_box(&points)
+        .ok_or_else(|| BittError::Invalid("no hand vertex is in front of the camera".into()))?;
+    Ok([b.min.x, b.min.y, b.max.x, b.max.y])
+}
+
+/// The box to give [`ImageInput::fit_square`] so that its square is the reference's crop
+/// (side `max(w, h) / REFERENCE_HAND_BOX_RATIO`, same centre).
+pub fn reference_crop_box(b: [f64; 4]) -> [f64; 4] {
+    let grow = 1.0 / REFERENCE_HAND_BOX_RATIO / (1.0 + CROP_MARGIN);
+    let (cx, cy) = ((b[0] + b[2]) / 2.0, (b[1] + b[3]) / 2.0);
+    let half = (b[2] - b[0]).max(b[3] - b[1]) / 2.0 * grow;
+    [cx - half, cy - half, cx + half, cy + half]
+}
+
+/// The pixel box of both hands ([`hands_box`]), refused when it lies outside the image (the
+/// image at `source` and its annotation do not belong together).
+pub fn hands_in_image(
+    hands: &TwoHandScene,
+    models: &HandPair,
+    source: &Path,
+) -> Result<[f64; 4], BittError> {
+    let b = hands_box(hands, models)
+        .map_err(|e| BittError::Invalid(format!("{}: {e}", source.display())))?;
+    let (w, h) = (
+        f64::from(hands.camera.width),
+        f64::from(hands.camera.height),
+    );
+    if b[2] < 0.0 || b[3] < 0.0 || b[0] > w || b[1] > h {
+        return Err(BittError::Invalid(format!(
+            "{}: the hands project to [{:.0}, {:.0}] - [{:.0}, {:.0}], outside the {w}x{h} \
+             image: the image and its annotation do not belong together",
+            source.display(),
+            b[0],
+            b[1],
+            b[2],
+            b[3]
+        )));
+    }
+    Ok(b)
 }
 
 /// The square `(x0, y0, side)` in pixels cropped from an `[h, w]` image (see
@@ -246,5 +303,18 @@ mod tests {
                 .to_string()
                 .contains("values")
         );
+    }
+
+    #[test]
+    fn reference_crop_has_the_reference_side() {
+        let b = [10.0, 20.0, 90.0, 60.0];
+        let g = reference_crop_box(b);
+        // fit_square's side from g equals max(w, h) / 0.8 from b.
+        let side = (g[2] - g[0]).max(g[3] - g[1]) * (1.0 + crate::input::CROP_MARGIN);
+        assert!(
+            (side - 80.0 / REFERENCE_HAND_BOX_RATIO).abs() < 1e-9,
+            "{side}"
+        );
+        assert!(((g[0] + g[2]) / 2.0 - 50.0).abs() < 1e-12);
     }
 }

@@ -10,6 +10,11 @@
 //! - [`metrics`], [`evaluate`]: image and texture metrics, renders at other views and poses.
 //! - [`lpips`]: LPIPS-VGG with user-provided weights (unavailable without them).
 //! - [`outputs`], [`run`]: the run folder (textures, renders, avatar, metrics, report).
+//! - [`avatar_export`]: the avatar files: rigged `avatar.glb`, `avatar_static.glb`, OBJ.
+//! - [`saved`]: a trained run read back from its folder (either kind), for re-rendering and
+//!   re-exporting without the networks.
+//! - [`viewer`]: the report's interactive 3D view of the avatar (three.js, embedded).
+//! - [`plot`]: the loss plot (`loss.png`: axes, decade ticks, legend, learning-rate steps).
 //! - [`hand_layer`]: the hand model as a differentiable burn function (both hands batched).
 //! - [`refine`]: mesh refinement of both hands against the photo through the renderer.
 //! - [`hand_priors`]: joint-angle, off-axis and penetration priors shared by `refine` and `fit`.
@@ -17,6 +22,7 @@
 //! - [`real`]: real data (an image + annotation pickle, InterHand2.6M scenes), real runs.
 
 pub mod assets;
+pub mod avatar_export;
 pub mod baselines;
 pub mod benchmark;
 pub mod checkpoint;
@@ -33,10 +39,13 @@ pub mod metrics;
 pub mod optim;
 pub mod outputs;
 pub mod pipeline;
+pub mod plot;
 pub mod real;
 pub mod refine;
 pub mod run;
+pub mod saved;
 pub mod trainer;
+pub mod viewer;
 
 pub use config::{LossWeights, OptimConfig, TrainConfig};
 pub use error::BittError;

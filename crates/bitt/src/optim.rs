@@ -198,12 +198,22 @@ mod tests {
         a: Linear,
     }
 
+    /// A linear layer, initialised holding the trainer's lock on flex's random generator
+    /// (a draw here while a trainer initialises on another test thread would shift its
+    /// weights).
+    fn linear(inputs: usize, outputs: usize, device: &Device) -> Linear {
+        let _only_us = crate::trainer::NETS_INIT
+            .lock()
+            .unwrap_or_else(|e| e.into_inner());
+        LinearConfig::new(inputs, outputs).init(device)
+    }
+
     /// Two Adam steps on `f(p) = sum(w p)` match PyTorch's update rule computed by hand.
     #[test]
     fn adam_matches_the_pytorch_update() {
         let device = Device::flex().autodiff();
         let net = Net {
-            a: LinearConfig::new(2, 1).init(&device),
+            a: linear(2, 1, &device),
         };
         let before = parameters_host(&net);
         let mut adam = Adam::new(OptimConfig::default());
@@ -230,16 +240,16 @@ mod tests {
     fn parameters_round_trip_and_mismatches_are_named() {
         let device = Device::flex().autodiff();
         let net = Net {
-            a: LinearConfig::new(3, 2).init(&device),
+            a: linear(3, 2, &device),
         };
         let values = parameters_host(&net);
         let other = Net {
-            a: LinearConfig::new(3, 2).init(&device),
+            a: linear(3, 2, &device),
         };
         let other = load_parameters(other, &values, &device).unwrap();
         assert_eq!(parameters_host(&other), values);
         let wrong = Net {
-            a: LinearConfig::new(2, 2).init(&device),
+            a: linear(2, 2, &device),
         };
         let e = load_parameters(wrong, &values, &device).unwrap_err();
         assert!(e.contains("shape"), "{e}");

@@ -7,7 +7,7 @@ use bitt_mesh::export::{ExportHand, glb_bytes, png_bytes, write_atomically};
 use bitt_texture::TextureLayout;
 
 use crate::BittError;
-use crate::losses::LossTerms;
+pub use crate::plot::write_loss_plot;
 
 /// `[3, H, W]` values in `[0, 1]` to an 8-bit RGB image (non-finite values are an error).
 pub fn rgb_image(values: &[f32], h: usize, w: usize) -> Result<image::RgbImage, BittError> {
@@ -69,81 +69,6 @@ pub fn contact_sheet(
         }
     }
     (out, gh, gw)
-}
-
-/// The loss curves (total and each term, log scale) as a PNG plot.
-pub fn write_loss_plot(path: &Path, history: &[LossTerms]) -> Result<(), BittError> {
-    let (w, h) = (640u32, 360u32);
-    let mut img = image::RgbImage::from_pixel(w, h, image::Rgb([255, 255, 255]));
-    let series: Vec<(Vec<f64>, [u8; 3])> = vec![
-        (history.iter().map(|t| t.total).collect(), [0, 0, 0]),
-        (history.iter().map(|t| t.rec_fine).collect(), [220, 50, 47]),
-        (
-            history.iter().map(|t| t.rec_coarse).collect(),
-            [38, 139, 210],
-        ),
-        (
-            history.iter().map(|t| t.rec_albedo).collect(),
-            [133, 153, 0],
-        ),
-        (history.iter().map(|t| t.nv).collect(), [211, 54, 130]),
-        (history.iter().map(|t| t.alb).collect(), [181, 137, 0]),
-        (history.iter().map(|t| t.sym).collect(), [42, 161, 152]),
-    ];
-    let positive = series
-        .iter()
-        .flat_map(|(s, _)| s.iter().copied())
-        .filter(|v| v.is_finite() && *v > 0.0);
-    let (lo, hi) = positive.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-        (a.min(v), b.max(v))
-    });
-    let (margin, pw, ph) = (40.0, f64::from(w) - 60.0, f64::from(h) - 60.0);
-    // Axes.
-    for x in 40..(w - 20) {
-        img.put_pixel(x, h - 20, image::Rgb([0, 0, 0]));
-    }
-    for y in 20..(h - 20) {
-        img.put_pixel(40, y, image::Rgb([0, 0, 0]));
-    }
-    if history.len() >= 2 && lo.is_finite() && hi > lo {
-        let (llo, lhi) = (lo.log10(), hi.log10());
-        // Decade grid lines.
-        let mut d = llo.floor();
-        while d <= lhi.ceil() {
-            if d >= llo && d <= lhi {
-                let y = margin - 20.0 + ph * (1.0 - (d - llo) / (lhi - llo));
-                for x in (41..(w - 20)).step_by(4) {
-                    img.put_pixel(x, y.round() as u32, image::Rgb([200, 200, 200]));
-                }
-            }
-            d += 1.0;
-        }
-        let n = history.len() - 1;
-        for (s, color) in &series {
-            let mut prev: Option<(f64, f64)> = None;
-            for (i, &v) in s.iter().enumerate() {
-                if !(v.is_finite() && v > 0.0) {
-                    prev = None;
-                    continue;
-                }
-                let x = margin + pw * i as f64 / n as f64;
-                let y = margin - 20.0 + ph * (1.0 - (v.log10() - llo) / (lhi - llo));
-                if let Some((px, py)) = prev {
-                    let steps = ((x - px).abs().max((y - py).abs()).ceil() as usize).max(1);
-                    for k in 0..=steps {
-                        let t = k as f64 / steps as f64;
-                        let (qx, qy) = (px + (x - px) * t, py + (y - py) * t);
-                        if qx >= 0.0 && qy >= 0.0 && qx < f64::from(w) && qy < f64::from(h) {
-                            img.put_pixel(qx as u32, qy as u32, image::Rgb(*color));
-                        }
-                    }
-                }
-                prev = Some((x, y));
-            }
-        }
-    }
-    write_atomically(path, &png_bytes(&img)?)?;
-    Ok(())
 }
 
 /// Both hands as a textured glTF binary (`avatar.glb`).

@@ -12,6 +12,7 @@ use burn::tensor::Device;
 
 use crate::BittError;
 use crate::assets::{HandAssets, ViewGeometry};
+use crate::avatar_export::AvatarFiles;
 use crate::config::TrainConfig;
 use crate::evaluate::{Avatar, TextureScore, ViewScore, mean_metrics, score_textures, score_view};
 use crate::input::ImageInput;
@@ -268,12 +269,20 @@ pub fn orbit_camera(camera: &PinholeCamera, center: DVec3, yaw: f64, pitch: f64)
     }
 }
 
-/// Writes every output of a trained run into `dir` and returns the summary.
+/// The hands of a synthetic scene's novel poses, for the avatar's clip.
+pub fn novel_pose_clip(scene: &SynthScene) -> Vec<TwoHandScene> {
+    scene.novel_poses.iter().map(|v| v.hands.clone()).collect()
+}
+
+/// Writes every output of a trained run into `dir` and returns the summary. `clip`: the
+/// poses the rigged avatar's animation plays (the scene's novel poses; see
+/// [`novel_pose_clip`]).
 pub fn write_run(
     dir: &Path,
     trainer: &Trainer,
     synthetic: Option<&SynthScene>,
     turntable_frames: usize,
+    clip: &[TwoHandScene],
 ) -> Result<RunSummary, BittError> {
     let outputs = trainer.forward()?;
     let avatar = Avatar::from_outputs(trainer, &outputs)?;
@@ -435,19 +444,33 @@ pub fn write_run(
         rgb_image(&texture_image(layout, &avatar.fine[0])?, s, s)?,
         rgb_image(&texture_image(layout, &avatar.fine[1])?, s, s)?,
     ];
-    let v = &trainer.view.geometry.vertices_host;
-    write_avatar_glb(
-        &dir.join(files::AVATAR),
-        &[
-            ("left_hand", &v[0], &trainer.assets.models.left, &images[0]),
-            (
-                "right_hand",
-                &v[1],
-                &trainer.assets.models.right,
-                &images[1],
-            ),
-        ],
-    )?;
+    // Rigged (with its clip and a static copy) when the hands' parameters are known; the
+    // posed meshes alone for a view made from vertices.
+    match &trainer.view.geometry.hands {
+        Some(hands) => AvatarFiles {
+            models: &trainer.assets.models,
+            hands,
+            textures: [&images[0], &images[1]],
+            material: bitt_render::scene::Material::default(),
+            clip: clip.to_vec(),
+        }
+        .write(dir)?,
+        None => {
+            let v = &trainer.view.geometry.vertices_host;
+            write_avatar_glb(
+                &dir.join(files::AVATAR),
+                &[
+                    ("left_hand", &v[0], &trainer.assets.models.left, &images[0]),
+                    (
+                        "right_hand",
+                        &v[1],
+                        &trainer.assets.models.right,
+                        &images[1],
+                    ),
+                ],
+            )?;
+        }
+    }
 
     // Ground truth.
     let input_hand = host4(&trainer.view.hand_image)?;
@@ -458,7 +481,11 @@ pub fn write_run(
         )?),
         None => None,
     };
-    write_loss_plot(&dir.join(files::LOSS_PLOT), &trainer.history)?;
+    write_loss_plot(
+        &dir.join(files::LOSS_PLOT),
+        &trainer.history,
+        &trainer.config.optim,
+    )?;
     gallery.push(("loss".into(), dir.join(files::LOSS_PLOT)));
     let summary = RunSummary {
         iterations: trainer.iteration,
@@ -639,6 +666,10 @@ fn write_report(
         trainer.assets.num_texels(),
         summary.input_psnr
     ));
+    // The interactive 3D view of the avatar and light `write_run` wrote next to this report.
+    let dir = path.parent().unwrap_or(Path::new("."));
+    html.push_str("<h2>3D avatar</h2>");
+    html.push_str(&crate::viewer::run_viewer_html(dir)?);
     if let Some(s) = &summary.synthetic {
         html.push_str("<h2>Against ground truth</h2><table><tr><th>evaluation</th><th>method</th><th>L1</th><th>PSNR</th><th>SSIM</th><th>MS-SSIM</th></tr>");
         let mut row = |name: &str, fine: &ImageMetrics, coarse: &ImageMetrics| {

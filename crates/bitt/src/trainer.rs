@@ -21,8 +21,11 @@ use crate::pipeline::{Outputs, TrainingView, forward};
 pub const MAX_NON_FINITE: usize = 8;
 
 /// Held while networks are initialised, which draws from the host backend's one random
-/// generator (see [`Trainer::new`]).
-static NETS_INIT: std::sync::Mutex<()> = std::sync::Mutex::new(());
+/// generator (see [`Trainer::new`]). Anything else in the process that draws from flex's
+/// generator (a module's random init in a test) holds it too: flex's generator is one
+/// `take`-and-put-back state, so a draw on another thread mid-initialisation shifts the
+/// networks' weights.
+pub(crate) static NETS_INIT: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 /// The factor on the learning rate at every recovery from a non-finite loss.
 pub const RECOVERY_LR_FACTOR: f64 = 0.5;

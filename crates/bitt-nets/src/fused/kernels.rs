@@ -642,7 +642,7 @@ pub(crate) fn norm_silu_backward_in_place(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fused::test_values::{close, values};
+    use bitt_testkit::{assert_close, values};
 
     /// The convolution as the textbook triple loop.
     fn conv_naive(x: &[f32], w: &[f32], d: ConvDims) -> Vec<f32> {
@@ -690,7 +690,7 @@ mod tests {
             let w = values(c_out * c_in * kernel, 2);
             let g = values(batch * c_out * len, 3);
             let z = conv_forward(&x, &w, d);
-            close(&z, &conv_naive(&x, &w, d), 1e-5, "forward");
+            assert_close(&z, &conv_naive(&x, &w, d), 1e-5, "forward");
             let dot = |a: &[f32], b: &[f32]| -> f64 {
                 a.iter().zip(b).map(|(a, b)| f64::from(a * b)).sum()
             };
@@ -741,7 +741,7 @@ mod tests {
                 let mut b = vec![0.0; rows_out * len];
                 per_tap_products(&mut a, &src, len, &taps, false);
                 stacked_products(&mut b, &src, len, &taps, true);
-                close(&b, &a, 1e-5, "stacked vs per tap");
+                assert_close(&b, &a, 1e-5, "stacked vs per tap");
             }
         }
     }
@@ -805,7 +805,7 @@ mod tests {
         let (zd, bd, gd, betad) = (f64s(&z), f64s(&bias), f64s(&gamma), f64s(&beta));
         let (y, stats) = norm_silu_forward(&z, &bias, &gamma, &beta, d);
         let yr = reference(&zd, &bd, &gd, &betad);
-        close(
+        assert_close(
             &y,
             &yr.iter().map(|&v| v as f32).collect::<Vec<_>>(),
             2e-6,

@@ -730,7 +730,7 @@ pub(crate) fn post_backward_in_place(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fused::test_values::{close, values};
+    use bitt_testkit::{assert_close, values};
 
     /// The convolution as the textbook loop nest, in f64.
     fn conv_naive(x: &[f32], w: &[f32], bias: &[f32], d: Conv2dDims) -> Vec<f32> {
@@ -810,7 +810,7 @@ mod tests {
             let w = values(d.c_out * d.patch(), 2);
             let bias = values(d.c_out, 3);
             let z = conv2d_forward(&x, &w, &bias, d);
-            close(&z, &conv_naive(&x, &w, &bias, d), 1e-4, "forward");
+            assert_close(&z, &conv_naive(&x, &w, &bias, d), 1e-4, "forward");
             let g = values(z.len(), 4);
             let (dx, dw) = conv2d_backward(&g, &x, &w, d, true, true);
             let (dx, dw) = (dx.unwrap(), dw.unwrap());
@@ -851,7 +851,7 @@ mod tests {
             // Only one of the two asked for.
             let (none, only_w) = conv2d_backward(&g, &x, &w, d, false, true);
             assert!(none.is_none());
-            close(&only_w.unwrap(), &dw, 1e-6, "dw alone");
+            assert_close(&only_w.unwrap(), &dw, 1e-6, "dw alone");
         }
     }
 
@@ -921,7 +921,7 @@ mod tests {
                 let (zd, gd, bd) = (f64s(&z), f64s(&gamma), f64s(&beta));
                 let (y, stats) = post_forward(&z, &gamma, &beta, d);
                 let yr: Vec<f32> = reference(&zd, &gd, &bd).iter().map(|&v| v as f32).collect();
-                close(&y, &yr, 1e-5, "y");
+                assert_close(&y, &yr, 1e-5, "y");
                 let mut dz = gy.clone();
                 let [dbias, dgamma, dbeta] =
                     post_backward_in_place(&mut dz, &z, &gamma, &beta, &stats, d);

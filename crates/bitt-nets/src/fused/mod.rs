@@ -240,31 +240,3 @@ fn values(t: &FlexTensor) -> Vec<f32> {
 fn flex_tensor<const D: usize>(values: Vec<f32>, shape: [usize; D]) -> FlexTensor {
     FlexTensor::from_data(TensorData::new(values, shape))
 }
-
-/// Test inputs and comparisons shared by the 1-D and 2-D kernels' tests.
-#[cfg(test)]
-pub(crate) mod test_values {
-    /// `n` deterministic values in `[-1, 1)` (xorshift of `seed`).
-    pub(crate) fn values(n: usize, seed: u64) -> Vec<f32> {
-        let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
-        (0..n)
-            .map(|_| {
-                s ^= s << 13;
-                s ^= s >> 7;
-                s ^= s << 17;
-                ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-            })
-            .collect()
-    }
-
-    /// Asserts `a` equals `b` element by element within `tol` relative (absolute below 1).
-    pub(crate) fn close(a: &[f32], b: &[f32], tol: f32, what: &str) {
-        assert_eq!(a.len(), b.len(), "{what}");
-        for (i, (x, y)) in a.iter().zip(b).enumerate() {
-            assert!(
-                (x - y).abs() <= tol * y.abs().max(1.0),
-                "{what} [{i}]: {x} vs {y}"
-            );
-        }
-    }
-}

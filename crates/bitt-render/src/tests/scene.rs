@@ -5,10 +5,11 @@ use bitt_mesh::glam::{DMat3, DVec3};
 use bitt_mesh::lbs::{HandParams, HandPose};
 use bitt_mesh::model::{NUM_BETAS, NUM_POSE};
 use bitt_mesh::{HandModel, OrthographicCamera, PinholeCamera, Side, procedural_pair};
+use bitt_testkit::{autodiff_devices, to_vec};
 use bitt_texture::TextureLayout;
 use burn::tensor::{Device, Tensor, TensorData};
 
-use super::{Rng, devices, to_vec};
+use super::Rng;
 use crate::scene::{
     Camera, DepthRange, LightValues, Material, PointLight, RenderSettings, Scene, SceneGeometry,
     TexelSurface, TexelVisibilityStats, TexturedMesh, UnwrapSettings, phong, render, unwrap,
@@ -117,7 +118,7 @@ fn phong_reference(
 
 #[test]
 fn phong_matches_an_independent_implementation() {
-    for (name, device) in devices() {
+    for (name, device) in autodiff_devices() {
         let light = LightValues {
             ambient: [0.3, 0.35, 0.4],
             diffuse: [0.7, 0.6, 0.5],
@@ -249,7 +250,7 @@ fn vertex_tensor(v: &[DVec3], device: &Device) -> Tensor<2> {
 
 #[test]
 fn two_procedural_hands_render_with_mutual_occlusion() {
-    for (name, device) in devices() {
+    for (name, device) in autodiff_devices() {
         let s = hand_scene(96);
         let scene = Scene::new(&[&s.meshes[0], &s.meshes[1]]).unwrap();
         let verts = [
@@ -333,7 +334,7 @@ fn two_procedural_hands_render_with_mutual_occlusion() {
 
 #[test]
 fn unwrapping_a_render_recovers_the_texture_on_visible_texels() {
-    for (name, device) in devices() {
+    for (name, device) in autodiff_devices() {
         let s = hand_scene(160);
         let scene = Scene::new(&[&s.meshes[0], &s.meshes[1]]).unwrap();
         let verts = [
@@ -487,7 +488,7 @@ fn unwrap_is_differentiable_in_the_image() {
 
 #[test]
 fn render_gradients_reach_the_light_and_the_texture() {
-    for (name, device) in devices() {
+    for (name, device) in autodiff_devices() {
         let s = hand_scene(48);
         let scene = Scene::new(&[&s.meshes[0], &s.meshes[1]]).unwrap();
         let verts = [
@@ -559,7 +560,7 @@ fn render_gradients_reach_the_light_and_the_texture() {
 /// vertices; a texture of another size than it was made for is an error.
 #[test]
 fn a_reused_scene_geometry_shades_like_render() {
-    for (name, device) in devices() {
+    for (name, device) in autodiff_devices() {
         let s = hand_scene(40);
         let scene = Scene::new(&[&s.meshes[0], &s.meshes[1]]).unwrap();
         let verts = [

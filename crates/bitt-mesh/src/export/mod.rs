@@ -14,6 +14,11 @@ use serde_json::json;
 use crate::MeshError;
 use crate::model::UvLayout;
 
+mod skinned;
+pub use skinned::{
+    RiggedHand, RiggedScene, gltf_vertex_sources, rigged_glb_bytes, skinned_vertices,
+};
+
 /// One hand to export.
 #[derive(Debug, Clone, Copy)]
 pub struct ExportHand<'a> {
@@ -247,15 +252,46 @@ fn pad_to_4(buf: &mut Vec<u8>, byte: u8) {
     buf.resize(buf.len().next_multiple_of(4), byte);
 }
 
-/// Binary-chunk builder: appends 4-byte-aligned views.
-struct BinBuilder {
-    bin: Vec<u8>,
-    views: Vec<serde_json::Value>,
-    accessors: Vec<serde_json::Value>,
+/// Binary-chunk builder: appends 4-byte-aligned views and the accessors over them.
+pub(crate) struct BinBuilder {
+    pub(crate) bin: Vec<u8>,
+    pub(crate) views: Vec<serde_json::Value>,
+    pub(crate) accessors: Vec<serde_json::Value>,
+}
+
+/// glTF buffer-view target of vertex attributes.
+const ARRAY_BUFFER: u32 = 34962;
+/// glTF buffer-view target of indices.
+const ELEMENT_ARRAY_BUFFER: u32 = 34963;
+
+/// Component-wise bounds of `width`-wide elements (`min`, `max`), as glTF wants them.
+pub(crate) fn bounds(data: &[f32], width: usize) -> (Vec<f32>, Vec<f32>) {
+    let mut lo = vec![f32::INFINITY; width];
+    let mut hi = vec![f32::NEG_INFINITY; width];
+    for c in data.chunks_exact(width) {
+        for k in 0..width {
+            lo[k] = lo[k].min(c[k]);
+            hi[k] = hi[k].max(c[k]);
+        }
+    }
+    (lo, hi)
+}
+
+/// Little-endian bytes of floats.
+pub(crate) fn f32_bytes(data: &[f32]) -> Vec<u8> {
+    data.iter().flat_map(|x| x.to_le_bytes()).collect()
 }
 
 impl BinBuilder {
-    fn view(&mut self, bytes: &[u8], target: Option<u32>) -> usize {
+    pub(crate) fn new() -> Self {
+        BinBuilder {
+            bin: Vec::new(),
+            views: Vec::new(),
+            accessors: Vec::new(),
+        }
+    }
+
+    pub(crate) fn view(&mut self, bytes: &[u8], target: Option<u32>) -> usize {
         pad_to_4(&mut self.bin, 0);
         let mut v = json!({"buffer": 0, "byteOffset": self.bin.len(), "byteLength": bytes.len()});
         if let Some(t) = target {
@@ -266,137 +302,235 @@ impl BinBuilder {
         self.views.len() - 1
     }
 
-    fn floats(&mut self, data: &[f32], width: usize, type_: &str, with_bounds: bool) -> usize {
-        let bytes: Vec<u8> = data.iter().flat_map(|x| x.to_le_bytes()).collect();
-        let view = self.view(&bytes, Some(34962));
+    /// Adds an accessor and returns its index.
+    pub(crate) fn accessor(&mut self, accessor: serde_json::Value) -> usize {
+        self.accessors.push(accessor);
+        self.accessors.len() - 1
+    }
+
+    /// Float elements of `width` components (`type_`: `"SCALAR"`, `"VEC3"`, ...) as a vertex
+    /// attribute (`attribute`) or as animation data; with their bounds when asked.
+    pub(crate) fn floats(
+        &mut self,
+        data: &[f32],
+        width: usize,
+        type_: &str,
+        with_bounds: bool,
+    ) -> usize {
+        self.floats_for(data, width, type_, with_bounds, Some(ARRAY_BUFFER))
+    }
+
+    pub(crate) fn floats_for(
+        &mut self,
+        data: &[f32],
+        width: usize,
+        type_: &str,
+        with_bounds: bool,
+        target: Option<u32>,
+    ) -> usize {
+        let view = self.view(&f32_bytes(data), target);
         let mut a = json!({"bufferView": view, "componentType": 5126, "count": data.len() / width, "type": type_});
         if with_bounds {
-            let mut lo = vec![f32::INFINITY; width];
-            let mut hi = vec![f32::NEG_INFINITY; width];
-            for c in data.chunks_exact(width) {
-                for k in 0..width {
-                    lo[k] = lo[k].min(c[k]);
-                    hi[k] = hi[k].max(c[k]);
-                }
-            }
+            let (lo, hi) = bounds(data, width);
             a["min"] = json!(lo);
             a["max"] = json!(hi);
         }
-        self.accessors.push(a);
-        self.accessors.len() - 1
+        self.accessor(a)
     }
 
-    fn indices(&mut self, data: &[u32]) -> usize {
+    pub(crate) fn indices(&mut self, data: &[u32]) -> usize {
         let bytes: Vec<u8> = data.iter().flat_map(|x| x.to_le_bytes()).collect();
-        let view = self.view(&bytes, Some(34963));
-        self.accessors.push(json!({"bufferView": view, "componentType": 5125, "count": data.len(), "type": "SCALAR"}));
-        self.accessors.len() - 1
+        let view = self.view(&bytes, Some(ELEMENT_ARRAY_BUFFER));
+        self.accessor(json!({"bufferView": view, "componentType": 5125, "count": data.len(), "type": "SCALAR"}))
     }
 }
 
-/// Splits a hand into glTF vertices: one per distinct (mesh vertex, UV vertex) corner pair,
-/// since glTF attributes are per vertex. Returns positions, normals, UVs (glTF convention,
-/// v = 0 at the top) and triangle indices.
-fn gltf_vertices(h: &ExportHand) -> (Vec<f32>, Vec<f32>, Option<Vec<f32>>, Vec<u32>) {
-    let normals = vertex_normals(h.vertices, h.faces);
-    let push3 = |out: &mut Vec<f32>, p: DVec3| out.extend([p.x as f32, p.y as f32, p.z as f32]);
-    match h.uv {
-        None => {
-            let mut pos = Vec::new();
-            let mut nor = Vec::new();
-            for (p, n) in h.vertices.iter().zip(&normals) {
-                push3(&mut pos, *p);
-                push3(&mut nor, *n);
-            }
-            (pos, nor, None, h.faces.iter().flatten().copied().collect())
-        }
-        Some(uv) => {
-            let mut map = std::collections::HashMap::new();
-            let (mut pos, mut nor, mut tex, mut idx) =
-                (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-            for (f, t) in h.faces.iter().zip(&uv.faces) {
-                for k in 0..3 {
-                    let key = (f[k], t[k]);
-                    let next = map.len() as u32;
-                    let i = *map.entry(key).or_insert_with(|| {
-                        push3(&mut pos, h.vertices[f[k] as usize]);
-                        push3(&mut nor, normals[f[k] as usize]);
-                        let q: DVec2 = uv.uvs[t[k] as usize];
-                        tex.extend([q.x as f32, 1.0 - q.y as f32]);
-                        next
-                    });
-                    idx.push(i);
+/// A hand split into glTF vertices: one per distinct (mesh vertex, UV vertex) corner pair,
+/// since glTF attributes are per vertex.
+pub(crate) struct SplitVertices {
+    /// The mesh vertex each glTF vertex copies.
+    pub(crate) source: Vec<u32>,
+    /// UVs (glTF convention, v = 0 at the top), when the hand has a layout.
+    pub(crate) uvs: Option<Vec<f32>>,
+    /// Triangle indices into the glTF vertices.
+    pub(crate) indices: Vec<u32>,
+}
+
+impl SplitVertices {
+    /// Splits `faces` at the seams of `uv`.
+    pub(crate) fn new(num_vertices: usize, faces: &[[u32; 3]], uv: Option<&UvLayout>) -> Self {
+        match uv {
+            None => SplitVertices {
+                source: (0..num_vertices as u32).collect(),
+                uvs: None,
+                indices: faces.iter().flatten().copied().collect(),
+            },
+            Some(uv) => {
+                let mut map = std::collections::HashMap::new();
+                let (mut source, mut tex, mut indices) = (Vec::new(), Vec::new(), Vec::new());
+                for (f, t) in faces.iter().zip(&uv.faces) {
+                    for k in 0..3 {
+                        let next = map.len() as u32;
+                        let i = *map.entry((f[k], t[k])).or_insert_with(|| {
+                            source.push(f[k]);
+                            let q: DVec2 = uv.uvs[t[k] as usize];
+                            tex.extend([q.x as f32, 1.0 - q.y as f32]);
+                            next
+                        });
+                        indices.push(i);
+                    }
+                }
+                SplitVertices {
+                    source,
+                    uvs: Some(tex),
+                    indices,
                 }
             }
-            (pos, nor, Some(tex), idx)
+        }
+    }
+
+    /// Per-vertex values of the mesh (`[V]`) copied to the glTF vertices, flattened.
+    pub(crate) fn gather(&self, values: &[DVec3]) -> Vec<f32> {
+        self.source
+            .iter()
+            .flat_map(|&v| {
+                let p = values[v as usize];
+                [p.x as f32, p.y as f32, p.z as f32]
+            })
+            .collect()
+    }
+}
+
+/// The metallic-roughness material the avatar's hands get.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PbrMaterial {
+    /// glTF `roughnessFactor` (0 mirror, 1 fully rough).
+    pub roughness: f64,
+    /// glTF `metallicFactor` (0 for skin, a dielectric).
+    pub metallic: f64,
+}
+
+impl Default for PbrMaterial {
+    /// A matte dielectric (roughness 0.8, metallic 0).
+    fn default() -> Self {
+        PbrMaterial {
+            roughness: 0.8,
+            metallic: 0.0,
         }
     }
 }
+
+/// The images, textures and materials of a glTF document being built.
+#[derive(Default)]
+pub(crate) struct Materials {
+    pub(crate) materials: Vec<serde_json::Value>,
+    pub(crate) textures: Vec<serde_json::Value>,
+    pub(crate) images: Vec<serde_json::Value>,
+}
+
+impl Materials {
+    /// Adds the material of a hand named `name`: `pbr` with the base colour `texture` (an
+    /// sRGB PNG embedded in the binary chunk) or a skin tone; returns its index.
+    pub(crate) fn add(
+        &mut self,
+        b: &mut BinBuilder,
+        name: &str,
+        texture: Option<&image::RgbImage>,
+        pbr: &PbrMaterial,
+    ) -> Result<usize, MeshError> {
+        let mut material = json!({
+            "name": name,
+            "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.62, 0.52, 1.0], "metallicFactor": pbr.metallic, "roughnessFactor": pbr.roughness},
+            "doubleSided": false
+        });
+        if let Some(img) = texture {
+            let view = b.view(&png_bytes(img)?, None);
+            self.images
+                .push(json!({"bufferView": view, "mimeType": "image/png", "name": name}));
+            self.textures
+                .push(json!({"source": self.images.len() - 1, "sampler": 0}));
+            material["pbrMetallicRoughness"]["baseColorFactor"] = json!([1.0, 1.0, 1.0, 1.0]);
+            material["pbrMetallicRoughness"]["baseColorTexture"] =
+                json!({"index": self.textures.len() - 1, "texCoord": 0});
+        }
+        self.materials.push(material);
+        Ok(self.materials.len() - 1)
+    }
+
+    /// Puts the materials, textures, images and the sampler into `doc`.
+    pub(crate) fn finish(self, doc: &mut serde_json::Value) {
+        doc["materials"] = json!(self.materials);
+        if !self.images.is_empty() {
+            doc["images"] = json!(self.images);
+            doc["textures"] = json!(self.textures);
+            doc["samplers"] =
+                json!([{"magFilter": 9729, "minFilter": 9729, "wrapS": 33071, "wrapT": 33071}]);
+        }
+    }
+}
+
+/// Rotation of pi about x as a glTF quaternion: (x, y, z) -> (x, -y, -z), OpenCV camera axes
+/// to glTF's.
+pub(crate) const OPENCV_TO_GLTF: [f64; 4] = [1.0, 0.0, 0.0, 0.0];
 
 /// The glTF 2.0 binary (`.glb`) bytes of `hands`: one mesh and node per hand under a root
 /// node converting OpenCV camera axes to glTF axes; textured hands get a PBR material whose
 /// base colour is the embedded PNG.
 pub fn glb_bytes(hands: &[ExportHand]) -> Result<Vec<u8>, MeshError> {
-    let mut b = BinBuilder {
-        bin: Vec::new(),
-        views: Vec::new(),
-        accessors: Vec::new(),
-    };
-    let (mut meshes, mut nodes, mut materials, mut textures, mut images) =
-        (vec![], vec![], vec![], vec![], vec![]);
+    glb_bytes_with_material(hands, &PbrMaterial::default())
+}
+
+/// [`glb_bytes`] with the hands' material.
+pub fn glb_bytes_with_material(
+    hands: &[ExportHand],
+    pbr: &PbrMaterial,
+) -> Result<Vec<u8>, MeshError> {
+    let mut b = BinBuilder::new();
+    let mut materials = Materials::default();
+    let (mut meshes, mut nodes) = (vec![], vec![]);
     for h in hands {
         check_hand(h)?;
-        let (pos, nor, tex, idx) = gltf_vertices(h);
+        let split = SplitVertices::new(h.vertices.len(), h.faces, h.uv);
+        let normals = vertex_normals(h.vertices, h.faces);
         let mut attributes = json!({
-            "POSITION": b.floats(&pos, 3, "VEC3", true),
-            "NORMAL": b.floats(&nor, 3, "VEC3", false),
+            "POSITION": b.floats(&split.gather(h.vertices), 3, "VEC3", true),
+            "NORMAL": b.floats(&split.gather(&normals), 3, "VEC3", false),
         });
-        if let Some(tex) = &tex {
+        if let Some(tex) = &split.uvs {
             attributes["TEXCOORD_0"] = json!(b.floats(tex, 2, "VEC2", false));
         }
-        let mut primitive =
-            json!({"attributes": attributes, "indices": b.indices(&idx), "mode": 4});
-        let mut material = json!({
-            "name": h.name,
-            "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.62, 0.52, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.8},
-            "doubleSided": false
-        });
-        if let Some(img) = h.texture {
-            let view = b.view(&png_bytes(img)?, None);
-            images.push(json!({"bufferView": view, "mimeType": "image/png", "name": h.name}));
-            textures.push(json!({"source": images.len() - 1, "sampler": 0}));
-            material["pbrMetallicRoughness"]["baseColorFactor"] = json!([1.0, 1.0, 1.0, 1.0]);
-            material["pbrMetallicRoughness"]["baseColorTexture"] =
-                json!({"index": textures.len() - 1, "texCoord": 0});
-        }
-        materials.push(material);
-        primitive["material"] = json!(materials.len() - 1);
+        let material = materials.add(&mut b, h.name, h.texture, pbr)?;
+        let primitive = json!({"attributes": attributes, "indices": b.indices(&split.indices), "mode": 4, "material": material});
         meshes.push(json!({"name": h.name, "primitives": [primitive]}));
         nodes.push(json!({"name": h.name, "mesh": meshes.len() - 1}));
     }
     let children: Vec<usize> = (1..=nodes.len()).collect();
-    // Rotation of pi about x: (x, y, z) -> (x, -y, -z), OpenCV camera axes to glTF's.
-    let root = json!({"name": "opencv_camera_to_gltf", "rotation": [1.0, 0.0, 0.0, 0.0], "children": children});
+    let root =
+        json!({"name": "opencv_camera_to_gltf", "rotation": OPENCV_TO_GLTF, "children": children});
     let mut all_nodes = vec![root];
     all_nodes.extend(nodes);
-    pad_to_4(&mut b.bin, 0);
     let mut doc = json!({
-        "asset": {"version": "2.0", "generator": concat!("bitt ", env!("CARGO_PKG_VERSION"))},
         "scene": 0,
         "scenes": [{"name": "hands", "nodes": [0]}],
         "nodes": all_nodes,
         "meshes": meshes,
-        "materials": materials,
-        "accessors": b.accessors,
-        "bufferViews": b.views,
-        "buffers": [{"byteLength": b.bin.len()}],
     });
-    if !images.is_empty() {
-        doc["images"] = json!(images);
-        doc["textures"] = json!(textures);
-        doc["samplers"] =
-            json!([{"magFilter": 9729, "minFilter": 9729, "wrapS": 33071, "wrapT": 33071}]);
-    }
+    materials.finish(&mut doc);
+    assemble_glb(doc, b)
+}
+
+/// The `.glb` container of a glTF document `doc` (without `asset`, `accessors`,
+/// `bufferViews` and `buffers`, which are added here) and its binary chunk.
+pub(crate) fn assemble_glb(
+    mut doc: serde_json::Value,
+    mut b: BinBuilder,
+) -> Result<Vec<u8>, MeshError> {
+    pad_to_4(&mut b.bin, 0);
+    doc["asset"] =
+        json!({"version": "2.0", "generator": concat!("bitt ", env!("CARGO_PKG_VERSION"))});
+    doc["accessors"] = json!(b.accessors);
+    doc["bufferViews"] = json!(b.views);
+    doc["buffers"] = json!([{"byteLength": b.bin.len()}]);
     let mut json_bytes = serde_json::to_vec(&doc)
         .map_err(|e| MeshError::InvalidParams(format!("glTF JSON: {e}")))?;
     pad_to_4(&mut json_bytes, b' ');

@@ -1,0 +1,409 @@
+//! Running the methods on one scene: each trained on the input view, then scored.
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use bitt_mesh::TwoHandScene;
+use bitt_render::scene::LightValues;
+use bitt_synth::{SynthScene, SynthView, TexelStats};
+use bitt_texture::TexturePca;
+use burn::tensor::Device;
+
+use super::{MeshSetting, Method, MethodScores, SCENE_RESULT_FORMAT, SceneResult};
+use crate::BittError;
+use crate::assets::ViewGeometry;
+use crate::baselines::{Baseline, BaselineConfig, run_baseline};
+use crate::config::TrainConfig;
+use crate::evaluate::{Avatar, fit_synthetic_view, hand_image, move_light, render_geometry};
+use crate::lpips::LpipsVgg;
+use crate::metrics::{TextureErrors, image_metrics, texture_errors};
+use crate::real::{RealScene, RealView, hand_masks};
+use crate::run::synthetic_trainer;
+use crate::trainer::{Observer, Trainer, read};
+
+/// An avatar to score: compact textures and a light in the training camera's frame.
+struct Candidate {
+    textures: [Vec<f32>; 2],
+    light: LightValues,
+}
+
+/// Ground truth prepared once per scene: hand images and posed geometry of every view.
+struct Truth {
+    input: (Vec<f32>, ViewGeometry, TwoHandScene),
+    views: Vec<(Vec<f32>, ViewGeometry, TwoHandScene)>,
+    poses: Vec<(Vec<f32>, ViewGeometry, TwoHandScene)>,
+}
+
+impl Truth {
+    /// From the input view, the novel views and poses, and `truth`, which gives a view's
+    /// ground-truth hand image and hands.
+    fn from_views<V>(
+        trainer: &Trainer,
+        (input, views, poses): (&V, &[V], &[V]),
+        truth: impl Fn(&V) -> Result<(Vec<f32>, TwoHandScene), BittError>,
+        device: &Device,
+    ) -> Result<Self, BittError> {
+        let prep = |v: &V| {
+            let (gt, hands) = truth(v)?;
+            let geometry = ViewGeometry::new(&trainer.assets, &hands, device)?;
+            Ok::<_, BittError>((gt, geometry, hands))
+        };
+        Ok(Truth {
+            input: prep(input)?,
+            views: views.iter().map(prep).collect::<Result<_, _>>()?,
+            poses: poses.iter().map(prep).collect::<Result<_, _>>()?,
+        })
+    }
+
+    /// A real scene: each photograph times the silhouettes of its annotated meshes (the
+    /// reference's `masked_img`).
+    fn real(trainer: &Trainer, scene: &RealScene, device: &Device) -> Result<Self, BittError> {
+        let size = trainer.config.nets.image_size;
+        let views = (&scene.train, &scene.novel_views[..], &scene.novel_poses[..]);
+        Self::from_views(
+            trainer,
+            views,
+            |v: &RealView| {
+                let masks = hand_masks(trainer, &v.hands)?;
+                Ok((hand_image(&v.image, &masks, size * size)?, v.hands.clone()))
+            },
+            device,
+        )
+    }
+
+    /// The first novel view's and pose's ground truth (for the contact sheets).
+    fn firsts(&self) -> (Option<Vec<f32>>, Option<Vec<f32>>) {
+        (
+            self.views.first().map(|v| v.0.clone()),
+            self.poses.first().map(|v| v.0.clone()),
+        )
+    }
+
+    /// A synthetic scene: each view's image times its true hand masks.
+    fn new(trainer: &Trainer, scene: &SynthScene, device: &Device) -> Result<Self, BittError> {
+        let size = trainer.config.nets.image_size;
+        let views = (&scene.train, &scene.novel_views[..], &scene.novel_poses[..]);
+        Self::from_views(
+            trainer,
+            views,
+            |v: &SynthView| {
+                let (image, masks, hands) = fit_synthetic_view(v, size)?;
+                Ok((hand_image(&image, &masks, size * size)?, hands))
+            },
+            device,
+        )
+    }
+}
+
+/// Renders of a candidate at the first novel view and pose (for the contact sheets).
+pub type SheetImages = (Vec<f32>, Vec<f32>);
+
+fn score(
+    trainer: &Trainer,
+    truth: &Truth,
+    c: &Candidate,
+    visible: &[Vec<bool>; 2],
+    gt_textures: Option<&[Vec<f32>; 2]>,
+    lpips: Option<&LpipsVgg>,
+) -> Result<(MethodScores, SheetImages), BittError> {
+    let size = trainer.config.nets.image_size;
+    let dims = [3, size, size];
+    let train_camera = truth.input.2.camera;
+    let mut first = (Vec::new(), Vec::new());
+    let one = |entry: &(Vec<f32>, ViewGeometry, TwoHandScene)| {
+        let (gt, geometry, hands) = entry;
+        let device = geometry.vertices[0].device();
+        let light = move_light(&c.light, &train_camera, &hands.camera).to_light(&device);
+        let img = render_geometry(trainer, geometry, &c.textures, &light)?;
+        let mut m = image_metrics(&img, gt, dims);
+        if let Some(net) = lpips {
+            m.lpips = Some(net.distance(&img, gt, dims, &device)?);
+        }
+        Ok::<_, BittError>((m, img))
+    };
+    let (input_view, _) = one(&truth.input)?;
+    let mut views = Vec::new();
+    for (k, v) in truth.views.iter().enumerate() {
+        let (m, img) = one(v)?;
+        if k == 0 {
+            first.0 = img;
+        }
+        views.push(m);
+    }
+    let mut poses = Vec::new();
+    for (k, v) in truth.poses.iter().enumerate() {
+        let (m, img) = one(v)?;
+        if k == 0 {
+            first.1 = img;
+        }
+        poses.push(m);
+    }
+    let texture: TextureErrors = gt_textures
+        .map(|gt| texture_errors(&c.textures, gt, visible))
+        .unwrap_or_default();
+    Ok((
+        MethodScores {
+            input_view,
+            novel_views: crate::evaluate::mean_metrics(&views),
+            novel_poses: crate::evaluate::mean_metrics(&poses),
+            texture: texture.raw,
+            texture_gain_fitted: texture.gain_fitted,
+            seconds: 0.0,
+        },
+        first,
+    ))
+}
+
+/// What [`evaluate_scene`] returns besides the scores: renders for the contact sheets,
+/// per method: (first novel view, first novel pose).
+pub type SceneSheets = Vec<(Method, SheetImages)>;
+
+/// Where the scenes of an evaluation come from: how to build a trainer for a configuration,
+/// the ground truth of every scored view, and (synthetic only) the true textures.
+/// Builds a trainer for a configuration.
+type TrainerFactory<'a> = &'a dyn Fn(&TrainConfig) -> Result<Trainer, BittError>;
+
+struct SceneSource<'a> {
+    trainer: TrainerFactory<'a>,
+    /// A trainer on the given meshes refined against the input image (`None`: not offered).
+    refined_trainer: Option<TrainerFactory<'a>>,
+    truth: &'a dyn Fn(&Trainer) -> Result<Truth, BittError>,
+    gt_textures: Option<&'a [Vec<f32>; 2]>,
+}
+
+/// What [`evaluate_with`] returns: scores per method, contact-sheet renders, the training
+/// view's visible texels and the ground truth of the first novel view and pose.
+type Evaluated = (
+    BTreeMap<Method, MethodScores>,
+    SceneSheets,
+    [Vec<bool>; 2],
+    (Option<Vec<f32>>, Option<Vec<f32>>),
+);
+
+/// Trains and scores `methods` on one synthetic scene. `device` must be an autodiff device;
+/// `observer` sees every BiTT training iteration.
+#[allow(clippy::too_many_arguments)]
+pub fn evaluate_scene(
+    scene: &SynthScene,
+    setting: MeshSetting,
+    config: &TrainConfig,
+    baseline: &BaselineConfig,
+    pca: &TexturePca,
+    methods: &[Method],
+    lpips: Option<&LpipsVgg>,
+    device: &Device,
+    observer: &mut dyn Observer,
+) -> Result<(SceneResult, ContactSheets), BittError> {
+    let host = device.clone().inner();
+    let refined = |cfg: &TrainConfig| -> Result<Trainer, BittError> {
+        let assets =
+            crate::assets::HandAssets::new(bitt_mesh::procedural_pair(), cfg.texture.resolution)?;
+        let done = crate::refine::refine_synthetic(
+            scene,
+            &assets,
+            pca,
+            cfg.nets.image_size,
+            &crate::refine::RefineConfig::default(),
+            device,
+            &mut crate::refine::Quiet,
+        )?;
+        let mut refined_scene = scene.clone();
+        refined_scene.given = done.hands;
+        synthetic_trainer(&refined_scene, cfg, pca, device)
+    };
+    let source = SceneSource {
+        trainer: &|cfg| synthetic_trainer(scene, cfg, pca, device),
+        refined_trainer: Some(&refined),
+        truth: &|trainer| Truth::new(trainer, scene, &host),
+        gt_textures: Some(&scene.textures),
+    };
+    let (results, sheets, _, (view, pose)) =
+        evaluate_with(&source, config, baseline, methods, lpips, device, observer)?;
+    Ok((
+        SceneResult {
+            format: SCENE_RESULT_FORMAT.to_string(),
+            seed: scene.seed,
+            setting,
+            preset: config.preset.to_string(),
+            iterations: config.iterations,
+            stats: scene.stats,
+            methods: results,
+        },
+        ContactSheets {
+            view,
+            pose,
+            methods: sheets,
+        },
+    ))
+}
+
+/// Contact-sheet material of a scene: the ground-truth hand image of the first novel view
+/// and novel pose (for real scenes the photograph times the annotated meshes' silhouettes),
+/// and each method's renders of them.
+#[derive(Debug, Clone)]
+pub struct ContactSheets {
+    /// Ground truth of the first novel view.
+    pub view: Option<Vec<f32>>,
+    /// Ground truth of the first novel pose.
+    pub pose: Option<Vec<f32>>,
+    /// Per method: (first novel view, first novel pose).
+    pub methods: SceneSheets,
+}
+
+/// Trains and scores `methods` on one real multi-view scene (InterHand2.6M, annotated
+/// meshes: Table 1a's setting). As [`evaluate_scene`], but every view's ground truth is its
+/// photograph times the silhouettes of its annotated meshes, the light stays where it was
+/// in the capture's world, texture-space errors are absent (no true texture exists) and the
+/// Table-3 statistics come from the training view's visible texels. `trainer` builds a
+/// fresh trainer on the training view for a configuration; `id` names the scene in the
+/// results.
+#[allow(clippy::too_many_arguments)]
+pub fn evaluate_real_scene(
+    scene: &RealScene,
+    id: u64,
+    trainer: &dyn Fn(&TrainConfig) -> Result<Trainer, BittError>,
+    config: &TrainConfig,
+    baseline: &BaselineConfig,
+    methods: &[Method],
+    lpips: Option<&LpipsVgg>,
+    device: &Device,
+    observer: &mut dyn Observer,
+) -> Result<(SceneResult, ContactSheets), BittError> {
+    let host = device.clone().inner();
+    if methods.contains(&Method::BittRefined) {
+        return Err(BittError::Invalid(
+            "the refined-mesh method is measured on synthetic scenes (their perturbed meshes); \
+             real scenes are trained on their annotated meshes"
+                .into(),
+        ));
+    }
+    let source = SceneSource {
+        trainer,
+        refined_trainer: None,
+        truth: &|t| Truth::real(t, scene, &host),
+        gt_textures: None,
+    };
+    let (results, sheets, visible, (view, pose)) =
+        evaluate_with(&source, config, baseline, methods, lpips, device, observer)?;
+    let stats = TexelStats::from_masks(&visible[0], &visible[1])
+        .map_err(|e| BittError::Invalid(format!("texel statistics: {e}")))?;
+    Ok((
+        SceneResult {
+            format: SCENE_RESULT_FORMAT.to_string(),
+            seed: id,
+            setting: MeshSetting::GtMesh,
+            preset: config.preset.to_string(),
+            iterations: config.iterations,
+            stats,
+            methods: results,
+        },
+        ContactSheets {
+            view,
+            pose,
+            methods: sheets,
+        },
+    ))
+}
+
+/// The shared part of [`evaluate_scene`] and [`evaluate_real_scene`].
+fn evaluate_with(
+    source: &SceneSource<'_>,
+    config: &TrainConfig,
+    baseline: &BaselineConfig,
+    methods: &[Method],
+    lpips: Option<&LpipsVgg>,
+    device: &Device,
+    observer: &mut dyn Observer,
+) -> Result<Evaluated, BittError> {
+    let mut results = BTreeMap::new();
+    let mut sheets = Vec::new();
+    // BiTT trainings; the full one also yields the HTML baseline.
+    let mut trainings: Vec<Method> = methods
+        .iter()
+        .copied()
+        .filter(|m| m.bitt_config(config).is_some())
+        .collect();
+    if methods.contains(&Method::Html) && !trainings.contains(&Method::Bitt) {
+        trainings.push(Method::Bitt);
+    }
+    trainings.sort();
+    let mut context: Option<(Trainer, Truth, [Vec<bool>; 2])> = None;
+    for m in trainings {
+        let cfg = m.bitt_config(config).expect("BiTT variant");
+        let started = Instant::now();
+        let mut trainer = match (m, source.refined_trainer) {
+            (Method::BittRefined, Some(refined)) => refined(&cfg)?,
+            (Method::BittRefined, None) => {
+                return Err(BittError::Invalid(
+                    "this scene source offers no refined meshes".into(),
+                ));
+            }
+            _ => (source.trainer)(&cfg)?,
+        };
+        trainer.train(None, observer)?;
+        let outputs = trainer.forward()?;
+        let avatar = Avatar::from_outputs(&trainer, &outputs)?;
+        let seconds = started.elapsed().as_secs_f64();
+        let visible = [
+            avatar.visible[0].iter().map(|&v| v > 0.5).collect(),
+            avatar.visible[1].iter().map(|&v| v > 0.5).collect(),
+        ];
+        let truth = (source.truth)(&trainer)?;
+        let mut candidates = Vec::new();
+        if methods.contains(&m) {
+            candidates.push((m, avatar.fine.clone(), seconds));
+        }
+        if m == Method::Bitt && methods.contains(&Method::Html) {
+            candidates.push((Method::Html, avatar.coarse.clone(), 0.0));
+        }
+        for (method, textures, secs) in candidates {
+            let c = Candidate {
+                textures,
+                light: avatar.light,
+            };
+            let (mut s, sheet) = score(&trainer, &truth, &c, &visible, source.gt_textures, lpips)?;
+            s.seconds = secs;
+            results.insert(method, s);
+            sheets.push((method, sheet));
+        }
+        // The baselines train on the given meshes, never on the refined ones.
+        if m != Method::BittRefined {
+            context = Some((trainer, truth, visible));
+        }
+    }
+    let baselines: Vec<(Method, Baseline)> = [
+        (Method::HarpLike, Baseline::HarpLike),
+        (Method::S2HandLike, Baseline::S2HandLike),
+    ]
+    .into_iter()
+    .filter(|(m, _)| methods.contains(m))
+    .collect();
+    let (trainer, truth, visible) = match context {
+        Some(c) => c,
+        None => {
+            let trainer = (source.trainer)(config)?;
+            let truth = (source.truth)(&trainer)?;
+            let visible = trainer
+                .view
+                .visible
+                .clone()
+                .map(|v| read(v.inner()).map(|x| x.iter().map(|&b| b > 0.5).collect()));
+            let [l, r] = visible;
+            (trainer, truth, [l?, r?])
+        }
+    };
+    for (method, b) in baselines {
+        let started = Instant::now();
+        let out = run_baseline(&trainer, b, baseline, device)?;
+        let seconds = started.elapsed().as_secs_f64();
+        let c = Candidate {
+            textures: out.textures,
+            light: out.light,
+        };
+        let (mut s, sheet) = score(&trainer, &truth, &c, &visible, source.gt_textures, lpips)?;
+        s.seconds = seconds;
+        results.insert(method, s);
+        sheets.push((method, sheet));
+    }
+    Ok((results, sheets, visible, truth.firsts()))
+}

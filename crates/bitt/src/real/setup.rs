@@ -1,0 +1,260 @@
+//! Fresh real runs: an annotation, keypoint fit or InterHand2.6M scene turned into a trainer.
+
+use std::path::Path;
+
+use bitt_mesh::interhand::InterHandScene;
+use bitt_mesh::{HandPair, Side, TwoHandScene};
+use burn::tensor::Device;
+
+use super::{
+    HandSource, INPUT_FORMAT, PriorSource, RealInput, RealScene, RealSource, RealView, ViewRecord,
+    absolute, annotation_view, check_hand_placement, interhand_views, load_models, prepare_view,
+    texture_model,
+};
+use crate::BittError;
+use crate::assets::{HandAssets, ViewGeometry};
+use crate::config::TrainConfig;
+use crate::refine::{MeshRefine, Refinement, refine_view};
+use crate::trainer::Trainer;
+
+/// A trainer for one prepared view: hand assets of `models` at the preset's texture size, the
+/// prior of `prior` on their layout (the configuration adapted to it; see the
+/// [module docs](super)). `device` must be an autodiff device.
+pub fn real_trainer(
+    view_image: &[f32],
+    hands: &TwoHandScene,
+    models: HandPair,
+    prior: &PriorSource,
+    config: TrainConfig,
+    cache: Option<&Path>,
+    device: &Device,
+) -> Result<Trainer, BittError> {
+    let mut hands = hands.clone();
+    let (trainer, _) = refined_real_trainer(
+        view_image, &mut hands, models, prior, config, cache, None, device,
+    )?;
+    Ok(trainer)
+}
+
+/// [`real_trainer`] that first refines the view's hands against its image when `refine` is
+/// given (`hands` is replaced by the refined hands, same camera), returning the refinement.
+#[allow(clippy::too_many_arguments)]
+pub fn refined_real_trainer(
+    view_image: &[f32],
+    hands: &mut TwoHandScene,
+    models: HandPair,
+    prior: &PriorSource,
+    mut config: TrainConfig,
+    cache: Option<&Path>,
+    refine: Option<MeshRefine<'_>>,
+    device: &Device,
+) -> Result<(Trainer, Option<Refinement>), BittError> {
+    let s = config.nets.image_size;
+    if [hands.camera.width, hands.camera.height] != [s as u32, s as u32] {
+        return Err(BittError::Invalid(format!(
+            "the training view is {}x{}; the {} preset needs {s}x{s}",
+            hands.camera.width, hands.camera.height, config.preset
+        )));
+    }
+    let assets = HandAssets::new(models, config.texture.resolution)?;
+    let pca = texture_model(&mut config, prior, &assets, cache, &device.clone().inner())?;
+    let refinement = match refine {
+        Some(r) => {
+            let done = refine_view(
+                &assets,
+                &pca,
+                hands,
+                view_image,
+                None,
+                r.config,
+                device,
+                r.observer,
+                "the training view",
+            )?;
+            *hands = done.hands.clone();
+            Some(done)
+        }
+        None => None,
+    };
+    let geometry = ViewGeometry::new(&assets, hands, device)?;
+    let trainer = Trainer::new(config, assets, &pca, geometry, view_image, None, device)?;
+    Ok((trainer, refinement))
+}
+
+/// Everything a fresh real run starts from: the record, the prepared views and the trainer.
+#[derive(Debug)]
+pub struct RealSetup {
+    /// What `input.json` will hold.
+    pub input: RealInput,
+    /// The prepared views (novel views and poses empty for a single annotation).
+    pub scene: RealScene,
+    /// The trainer (its `config` possibly adapted to the prior).
+    pub trainer: Trainer,
+    /// The mesh refinement of the training view, when asked for (its hands are the view's).
+    pub refinement: Option<Refinement>,
+}
+
+/// A fresh real run from an image and its BiTT annotation pickle.
+#[allow(clippy::too_many_arguments)]
+pub fn annotation_setup(
+    image: &Path,
+    annotation: &Path,
+    hands: &HandSource,
+    prior: &PriorSource,
+    config: TrainConfig,
+    cache: Option<&Path>,
+    refine: Option<MeshRefine<'_>>,
+    device: &Device,
+) -> Result<RealSetup, BittError> {
+    let models = load_models(hands, prior)?;
+    let view = annotation_view(image, annotation, &models, config.nets.image_size)?;
+    let source = RealSource::Annotation {
+        image: absolute(image),
+        annotation: absolute(annotation),
+    };
+    single_view_setup(
+        view, source, image, models, hands, prior, config, cache, refine, device,
+    )
+}
+
+/// The setup of a run on one prepared view (`image` is its photo).
+#[allow(clippy::too_many_arguments)]
+fn single_view_setup(
+    mut view: RealView,
+    source: RealSource,
+    image: &Path,
+    models: HandPair,
+    hands: &HandSource,
+    prior: &PriorSource,
+    config: TrainConfig,
+    cache: Option<&Path>,
+    refine: Option<MeshRefine<'_>>,
+    device: &Device,
+) -> Result<RealSetup, BittError> {
+    let (trainer, refinement) = refined_real_trainer(
+        &view.image,
+        &mut view.hands,
+        models,
+        prior,
+        config,
+        cache,
+        refine,
+        device,
+    )?;
+    Ok(RealSetup {
+        refinement,
+        input: RealInput {
+            format: INPUT_FORMAT.into(),
+            source,
+            hands: hands.absolute(),
+            prior: prior.absolute(),
+            train: ViewRecord {
+                source: absolute(image),
+                ..ViewRecord::from(&view)
+            },
+            novel_views: Vec::new(),
+            novel_poses: Vec::new(),
+        },
+        scene: RealScene {
+            train: view,
+            novel_views: Vec::new(),
+            novel_poses: Vec::new(),
+        },
+        trainer,
+    })
+}
+
+/// A fresh real run from a photo whose hands were fitted to its keypoints
+/// ([`crate::fit::fit_photo`]; `fit.image` is the photo as fitted, `keypoints` the file).
+///
+/// # Errors
+/// A fit without both hands, hands outside the image; as [`real_trainer`].
+#[allow(clippy::too_many_arguments)]
+pub fn keypoint_setup(
+    fit: &crate::fit::PhotoFit,
+    image: &Path,
+    keypoints: &Path,
+    hands: &HandSource,
+    prior: &PriorSource,
+    config: TrainConfig,
+    cache: Option<&Path>,
+    refine: Option<MeshRefine<'_>>,
+    device: &Device,
+) -> Result<RealSetup, BittError> {
+    for side in Side::BOTH {
+        if fit.hands.hand(side).is_none() {
+            return Err(BittError::Invalid(format!(
+                "{}: the {side} hand has too few keypoints to be fitted; BiTT needs both hands",
+                keypoints.display()
+            )));
+        }
+    }
+    let models = fit.models.clone();
+    check_hand_placement(&fit.hands, &models, keypoints)?;
+    let view = prepare_view(
+        "train",
+        image,
+        fit.image.clone(),
+        &fit.hands,
+        &models,
+        config.nets.image_size,
+    )?;
+    let source = RealSource::Keypoints {
+        image: absolute(image),
+        keypoints: absolute(keypoints),
+        mirrored: fit.mirrored,
+    };
+    single_view_setup(
+        view, source, image, models, hands, prior, config, cache, refine, device,
+    )
+}
+
+/// A fresh real run from a selected InterHand2.6M scene.
+#[allow(clippy::too_many_arguments)]
+pub fn interhand_setup(
+    scene: &InterHandScene,
+    paths: &bitt_mesh::interhand::InterHandPaths,
+    hands: &HandSource,
+    prior: &PriorSource,
+    config: TrainConfig,
+    cache: Option<&Path>,
+    refine: Option<MeshRefine<'_>>,
+    device: &Device,
+) -> Result<RealSetup, BittError> {
+    let models = load_models(hands, prior)?;
+    let mut views = interhand_views(scene, &models, config.nets.image_size)?;
+    let (trainer, refinement) = refined_real_trainer(
+        &views.train.image,
+        &mut views.train.hands,
+        models,
+        prior,
+        config,
+        cache,
+        refine,
+        device,
+    )?;
+    let record = |v: &RealView| ViewRecord {
+        source: absolute(&v.source),
+        ..ViewRecord::from(v)
+    };
+    Ok(RealSetup {
+        refinement,
+        input: RealInput {
+            format: INPUT_FORMAT.into(),
+            source: RealSource::InterHand {
+                root: absolute(&paths.root),
+                split: paths.split.clone(),
+                capture: scene.capture,
+                frame: scene.train.entry.frame_idx,
+                camera: scene.train.entry.camera.clone(),
+            },
+            hands: hands.absolute(),
+            prior: prior.absolute(),
+            train: record(&views.train),
+            novel_views: views.novel_views.iter().map(record).collect(),
+            novel_poses: views.novel_poses.iter().map(record).collect(),
+        },
+        scene: views,
+        trainer,
+    })
+}

@@ -1,0 +1,199 @@
+//! A trained run read back from its folder, whichever kind it is: a synthetic run (its scene
+//! is in the folder) or a real one (`input.json`; the hand models are read again from where
+//! the run recorded them). What `bitt render-avatar` and `bitt export` start from: no networks
+//! are needed, only the fine textures, the light, the hands and their models.
+
+use std::path::Path;
+
+use bitt_mesh::{HandPair, PinholeCamera, Side, TwoHandScene, procedural_pair};
+use bitt_render::scene::LightValues;
+use burn::tensor::Device;
+
+use crate::BittError;
+use crate::assets::HandAssets;
+use crate::real::{RealAvatar, RealInput, render_textures};
+use crate::run::SavedAvatar;
+
+/// A saved avatar of either kind of run.
+#[derive(Debug, Clone)]
+pub enum SavedRun {
+    /// A synthetic run (`scene/` in the folder).
+    Synthetic(Box<SavedAvatar>),
+    /// A real run, with the assets (models, layouts) it was trained with.
+    Real(Box<RealAvatar>, Box<HandAssets>),
+}
+
+impl SavedRun {
+    /// Reads the run folder `dir`.
+    ///
+    /// # Errors
+    /// A file of the run that is missing or corrupt (named), or hand models that cannot be
+    /// read again.
+    pub fn load(dir: &Path) -> Result<Self, BittError> {
+        let context = |e: BittError| {
+            BittError::Invalid(format!(
+                "{}: not a complete train-scene run: {e}",
+                dir.display()
+            ))
+        };
+        Ok(if RealInput::is_real_run(dir) {
+            let avatar = RealAvatar::load(dir).map_err(context)?;
+            let assets = avatar.assets().map_err(|e| {
+                BittError::Invalid(format!(
+                    "{}: the hand models the run was trained with: {e}",
+                    dir.display()
+                ))
+            })?;
+            SavedRun::Real(Box::new(avatar), Box::new(assets))
+        } else {
+            SavedRun::Synthetic(Box::new(SavedAvatar::load(dir).map_err(context)?))
+        })
+    }
+
+    /// The hand models.
+    pub fn models(&self) -> HandPair {
+        match self {
+            SavedRun::Synthetic(_) => procedural_pair(),
+            SavedRun::Real(_, assets) => assets.models.clone(),
+        }
+    }
+
+    /// The assets (models and texture layouts) the run was trained with.
+    ///
+    /// # Errors
+    /// As [`HandAssets::new`].
+    pub fn assets(&self) -> Result<HandAssets, BittError> {
+        match self {
+            SavedRun::Synthetic(a) => {
+                HandAssets::new(procedural_pair(), a.config.texture.resolution)
+            }
+            SavedRun::Real(_, assets) => Ok((**assets).clone()),
+        }
+    }
+
+    /// The side of the run's square images.
+    pub fn image_size(&self) -> usize {
+        match self {
+            SavedRun::Synthetic(a) => a.config.nets.image_size,
+            SavedRun::Real(a, _) => a.config.nets.image_size,
+        }
+    }
+
+    /// The training pose with the training camera.
+    pub fn training(&self) -> TwoHandScene {
+        match self {
+            SavedRun::Synthetic(a) => TwoHandScene {
+                camera: a.camera,
+                ..a.scene.given.clone()
+            },
+            SavedRun::Real(a, _) => a.input.train.hands.clone(),
+        }
+    }
+
+    /// The training camera.
+    pub fn camera(&self) -> PinholeCamera {
+        match self {
+            SavedRun::Synthetic(a) => a.camera,
+            SavedRun::Real(a, _) => a.camera(),
+        }
+    }
+
+    /// The estimated light, in the training camera's frame.
+    pub fn light(&self) -> LightValues {
+        match self {
+            SavedRun::Synthetic(a) => a.light,
+            SavedRun::Real(a, _) => a.light,
+        }
+    }
+
+    /// Fine textures `[3, T]`, left then right.
+    pub fn fine(&self) -> &[Vec<f32>; 2] {
+        match self {
+            SavedRun::Synthetic(a) => &a.fine,
+            SavedRun::Real(a, _) => &a.fine,
+        }
+    }
+
+    /// How many novel poses the run's scene has.
+    pub fn num_novel_poses(&self) -> usize {
+        match self {
+            SavedRun::Synthetic(a) => a.scene.novel_poses.len(),
+            SavedRun::Real(a, _) => a.input.novel_poses.len(),
+        }
+    }
+
+    /// Novel pose `k` of the run's scene; synthetic novel poses are seen from the training
+    /// camera, real ones (InterHand2.6M) from their own camera.
+    ///
+    /// # Errors
+    /// [`BittError::Invalid`] when the run has no novel pose `k`.
+    pub fn novel_pose(&self, k: usize) -> Result<TwoHandScene, BittError> {
+        match self {
+            SavedRun::Synthetic(a) => a.view(Some(k), 0.0, 0.0),
+            SavedRun::Real(a, _) => {
+                let poses = &a.input.novel_poses;
+                if poses.is_empty() {
+                    return Err(BittError::Invalid(format!(
+                        "novel pose {k}: this run was trained from a single annotation and has \
+                         no novel poses"
+                    )));
+                }
+                let p = poses.get(k).ok_or_else(|| {
+                    BittError::Invalid(format!(
+                        "novel pose {k}: the run has {} novel poses",
+                        poses.len()
+                    ))
+                })?;
+                Ok(p.hands.clone())
+            }
+        }
+    }
+
+    /// Every novel pose of the run's scene (the avatar's clip).
+    ///
+    /// # Errors
+    /// As [`Self::novel_pose`].
+    pub fn novel_poses(&self) -> Result<Vec<TwoHandScene>, BittError> {
+        (0..self.num_novel_poses())
+            .map(|k| self.novel_pose(k))
+            .collect()
+    }
+
+    /// A named pose of the synthetic generator with the avatar's hand shapes, seen from the
+    /// front and above by a camera of the run's image size.
+    ///
+    /// # Errors
+    /// As [`crate::real::procedural_pose`].
+    pub fn procedural_pose(
+        &self,
+        family: bitt_synth::PoseFamily,
+        seed: u64,
+    ) -> Result<TwoHandScene, BittError> {
+        let training = self.training();
+        let betas = |side: Side| {
+            training
+                .hand(side)
+                .map(|h| h.betas.clone())
+                .unwrap_or_else(|| vec![0.0; bitt_mesh::model::NUM_BETAS])
+        };
+        let (l, r) = (betas(Side::Left), betas(Side::Right));
+        crate::real::procedural_pose(&self.models(), family, [&l, &r], seed, self.image_size())
+    }
+
+    /// Renders the avatar's hands posed as `hands` (its camera included) under `light`;
+    /// `[3, H, W]` on the host.
+    ///
+    /// # Errors
+    /// Hands that cannot be posed or rendered.
+    pub fn render(
+        &self,
+        hands: &TwoHandScene,
+        light: &LightValues,
+        device: &Device,
+    ) -> Result<Vec<f32>, BittError> {
+        match self {
+            SavedRun::Synthetic(a) => a.render(hands, Some(light), device),
+            SavedRun::Real(a, assets) => render_textures(assets, &a.fine, hands, light, device),
+        }
+    }
+}
