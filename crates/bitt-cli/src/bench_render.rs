@@ -124,7 +124,7 @@ pub fn run(args: &BenchRenderArgs) -> Result<()> {
 
     // The demo scene, its camera scaled to the image size.
     let models = procedural_pair();
-    let scene = crate::demo::demo_scene(&models);
+    let scene = bitt::demo::demo_scene(&models);
     let posed = scene.pose_in_camera(&models)?;
     let scale = args.size as f64 / f64::from(scene.camera.width);
     let camera = Camera::Pinhole(PinholeCamera::looking_down_z(

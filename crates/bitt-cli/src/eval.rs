@@ -7,14 +7,13 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use bitt::baselines::BaselineConfig;
 use bitt::benchmark::{
-    ContactSheets, MeshSetting, Method, SCENE_RESULT_FORMAT, SceneResult, evaluate_real_scene,
-    evaluate_scene, results_markdown, summarize,
+    EvalPlan, MeshSetting, Method, evaluate_real_scene, evaluate_scene, interhand_scene_id,
+    parse_shard, pending, prepare_folder, result_path, shard_seeds, trainings_per_scene,
+    write_scene,
 };
-use bitt::outputs::{contact_sheet, write_png};
 use bitt::real::{interhand_views, load_models, real_trainer};
 use bitt::run::texture_prior_with_progress;
 use bitt::{Observer, Progress, TrainConfig};
-use bitt_mesh::export::write_atomically;
 use bitt_mesh::interhand::{InterHandDataset, InterHandSelection};
 use bitt_nets::Preset;
 use bitt_synth::{BENCHMARK_SCENES, MeshNoise, SynthConfig};
@@ -112,25 +111,6 @@ pub struct MergeArgs {
     pub dirs: Vec<PathBuf>,
 }
 
-fn parse_shard(s: &str) -> Result<(usize, usize)> {
-    let (i, n) = s
-        .split_once('/')
-        .with_context(|| format!("--shard {s}: expected i/N"))?;
-    let (i, n): (usize, usize) = (
-        i.trim().parse().with_context(|| format!("--shard {s}"))?,
-        n.trim().parse().with_context(|| format!("--shard {s}"))?,
-    );
-    if n == 0 || i >= n {
-        bail!("--shard {s}: need 0 <= i < N");
-    }
-    Ok((i, n))
-}
-
-fn result_path(out: &Path, setting: MeshSetting, seed: u64) -> PathBuf {
-    out.join("scenes")
-        .join(format!("{}-{seed:016x}.json", setting.key()))
-}
-
 /// Progress over the whole evaluation (`crate::progress`): BiTT iterations are the unit of
 /// work.
 struct EvalBar {
@@ -215,23 +195,25 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     };
     let device = args.device.device()?.autodiff();
     let host = device.clone().inner();
-    std::fs::create_dir_all(args.out.join("scenes"))
-        .with_context(|| format!("creating {}", args.out.join("scenes").display()))?;
-    write_atomically(
-        &args.out.join("config.json"),
-        serde_json::to_string_pretty(&serde_json::json!({
-            "train": config,
-            "baseline": baseline,
-            "methods": methods.iter().map(|m| m.key()).collect::<Vec<_>>(),
-            "settings": settings.iter().map(|s| s.key()).collect::<Vec<_>>(),
-            "scenes": scenes,
-            "dataset": match args.dataset {
-                Dataset::Synthetic => "synthetic".to_string(),
-                Dataset::Interhand => format!("interhand {} {}", args.split, args.root.as_ref().map_or(String::new(), |r| r.display().to_string())),
-            },
-        }))?
-        .as_bytes(),
-    )?;
+    let dataset = match args.dataset {
+        Dataset::Synthetic => "synthetic".to_string(),
+        Dataset::Interhand => format!(
+            "interhand {} {}",
+            args.split,
+            args.root
+                .as_ref()
+                .map_or(String::new(), |r| r.display().to_string())
+        ),
+    };
+    let plan = EvalPlan {
+        train: &config,
+        baseline: &baseline,
+        methods: &methods,
+        settings: &settings,
+        scenes,
+        dataset: &dataset,
+    };
+    prepare_folder(&args.out, &plan)?;
     let lpips = match &args.lpips {
         Some(p) => Some(
             LpipsVgg::load(p, &host).with_context(|| format!("LPIPS weights {}", p.display()))?,
@@ -251,16 +233,8 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         };
         return run_interhand(args, &interhand, settings, &device, started);
     }
-    let seeds: Vec<(usize, u64)> = bitt_synth::benchmark_seeds(scenes)
-        .into_iter()
-        .enumerate()
-        .filter(|(k, _)| k % shards == shard)
-        .collect();
-    let todo: Vec<(u64, MeshSetting)> = seeds
-        .iter()
-        .flat_map(|&(_, seed)| settings.iter().map(move |&s| (seed, s)))
-        .filter(|&(seed, s)| !result_path(&args.out, s, seed).is_file())
-        .collect();
+    let seeds = shard_seeds(scenes, (shard, shards));
+    let todo = pending(&args.out, &seeds, &settings);
     let skipped = seeds.len() * settings.len() - todo.len();
     if skipped > 0 {
         eprintln!(
@@ -268,11 +242,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             args.out.display()
         );
     }
-    let trainings = methods
-        .iter()
-        .filter(|m| m.bitt_config(&config).is_some())
-        .count()
-        .max(usize::from(methods.contains(&Method::Html)));
+    let trainings = trainings_per_scene(&methods, &config);
     let mut bar = EvalBar {
         line: ProgressLine::open_ended(),
         done: 0,
@@ -314,52 +284,16 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             &mut bar,
         )
         .with_context(|| format!("scene {seed:#x} ({})", setting.key()))?;
-        write_sheet(
+        write_scene(
             &args.out,
-            &format!("{}-{seed:016x}", setting.key()),
+            &result,
             &scene.train.image,
             &sheets,
             config.nets.image_size,
         )?;
-        write_atomically(
-            &result_path(&args.out, setting, seed),
-            serde_json::to_string_pretty(&result)?.as_bytes(),
-        )?;
     }
     eprintln!();
     finish(&args.out, started)
-}
-
-/// `sheets/{name}.png`: the input, the ground truth and each method at the first novel view
-/// (top row) and the first novel pose (bottom row); `sheets/columns.txt` names the columns.
-fn write_sheet(
-    out: &Path,
-    name: &str,
-    input: &[f32],
-    sheets: &ContactSheets,
-    size: usize,
-) -> Result<()> {
-    let (Some(view), Some(pose)) = (&sheets.view, &sheets.pose) else {
-        return Ok(());
-    };
-    let mut panels = vec![input.to_vec(), view.clone()];
-    panels.extend(sheets.methods.iter().map(|(_, s)| s.0.clone()));
-    panels.push(input.to_vec());
-    panels.push(pose.clone());
-    panels.extend(sheets.methods.iter().map(|(_, s)| s.1.clone()));
-    let (img, h, w) = contact_sheet(&panels, size, size, 2 + sheets.methods.len());
-    let dir = out.join("sheets");
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    write_png(&dir.join(format!("{name}.png")), &img, h, w)?;
-    let legend: Vec<&str> = ["input", "ground truth"]
-        .into_iter()
-        .chain(sheets.methods.iter().map(|(m, _)| m.key()))
-        .collect();
-    write_atomically(
-        &dir.join("columns.txt"),
-        format!("{}\n", legend.join(" | ")).as_bytes(),
-    )?;
-    Ok(())
 }
 
 /// What an InterHand2.6M evaluation shares with a synthetic one.
@@ -369,16 +303,6 @@ struct InterhandEval<'a> {
     methods: &'a [Method],
     lpips: Option<&'a LpipsVgg>,
     shard: (usize, usize),
-}
-
-/// A stable id of an InterHand2.6M scene (FNV-1a of split, capture, frame and camera): the
-/// name of its result file.
-fn interhand_scene_id(split: &str, capture: i64, frame: i64, camera: &str) -> u64 {
-    format!("interhand/{split}/{capture}/{frame}/{camera}")
-        .bytes()
-        .fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
-            (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
-        })
 }
 
 /// `bitt eval --dataset interhand`: one scene per capture, annotated meshes.
@@ -415,12 +339,7 @@ fn run_interhand(
     };
     let (shard, shards) = e.shard;
     let size = e.config.nets.image_size;
-    let trainings = e
-        .methods
-        .iter()
-        .filter(|m| m.bitt_config(e.config).is_some())
-        .count()
-        .max(usize::from(e.methods.contains(&Method::Html)));
+    let trainings = trainings_per_scene(e.methods, e.config);
     let mut bar = EvalBar {
         line: ProgressLine::open_ended(),
         done: 0,
@@ -485,14 +404,7 @@ fn run_interhand(
             &views, id, &make, e.config, e.baseline, e.methods, e.lpips, device, &mut bar,
         )
         .with_context(|| format!("InterHand2.6M capture {capture}"))?;
-        write_sheet(
-            &args.out,
-            &format!("gt-mesh-{id:016x}"),
-            &views.train.image,
-            &sheets,
-            size,
-        )?;
-        write_atomically(&path, serde_json::to_string_pretty(&result)?.as_bytes())?;
+        write_scene(&args.out, &result, &views.train.image, &sheets, size)?;
     }
     eprintln!();
     if taken == 0 {
@@ -512,72 +424,9 @@ fn finish(out: &Path, started: Instant) -> Result<()> {
     Ok(())
 }
 
-/// Reads every scene result under `dirs[k]/scenes/` and writes `results.json` and
-/// `results.md` into `dirs[0]`.
+/// Merges the scene results of `dirs` into the tables of `dirs[0]` and prints them.
 fn merge(dirs: &[PathBuf]) -> Result<()> {
-    let mut results: Vec<SceneResult> = Vec::new();
-    for dir in dirs {
-        let scenes = dir.join("scenes");
-        let entries =
-            std::fs::read_dir(&scenes).with_context(|| format!("reading {}", scenes.display()))?;
-        let mut paths: Vec<PathBuf> = entries
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|e| e == "json"))
-            .collect();
-        paths.sort();
-        for p in paths {
-            let text =
-                std::fs::read_to_string(&p).with_context(|| format!("reading {}", p.display()))?;
-            let r: SceneResult = serde_json::from_str(&text)
-                .with_context(|| format!("{}: not a scene result", p.display()))?;
-            if r.format != SCENE_RESULT_FORMAT {
-                bail!(
-                    "{}: format {} (expected {SCENE_RESULT_FORMAT})",
-                    p.display(),
-                    r.format
-                );
-            }
-            if !results
-                .iter()
-                .any(|x| x.seed == r.seed && x.setting == r.setting)
-            {
-                results.push(r);
-            }
-        }
-    }
-    if results.is_empty() {
-        bail!(
-            "no scene results under {}",
-            dirs[0].join("scenes").display()
-        );
-    }
-    let summary = summarize(&results);
-    let out = &dirs[0];
-    write_atomically(
-        &out.join("results.json"),
-        serde_json::to_string_pretty(&serde_json::json!({
-            "summary": summary,
-            "scenes": results,
-        }))?
-        .as_bytes(),
-    )?;
-    let has_lpips = summary
-        .settings
-        .values()
-        .flat_map(|per| per.values())
-        .any(|m| {
-            [m.input_view, m.novel_views, m.novel_poses]
-                .iter()
-                .any(|x| x.is_some_and(|x| x.lpips.is_some()))
-        });
-    let note = if has_lpips {
-        "LPIPS-VGG from the user's weights (`bitt convert-lpips`), on images mapped to [-1, 1]"
-    } else {
-        "unavailable (no LPIPS weights; never estimated)"
-    };
-    let md = results_markdown(&summary, note);
-    write_atomically(&out.join("results.md"), md.as_bytes())?;
-    println!("{md}");
+    println!("{}", bitt::benchmark::merge(dirs)?);
     Ok(())
 }
 
@@ -589,6 +438,7 @@ pub fn merge_cmd(args: &MergeArgs) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use bitt::benchmark::SceneResult;
     use bitt_tests::real_fixture::{scratch, write_mini_interhand};
     use clap::Parser;
 

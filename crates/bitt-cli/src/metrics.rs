@@ -4,7 +4,9 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
+use bitt::BittError;
 use bitt::lpips::{self, LpipsVgg};
+use bitt::lpips_convert::{self, StateDict};
 use bitt::metrics::{SsimWindow, image_metrics_with, masked_image_metrics};
 use bitt_pickle::{ArrayData, Value};
 use bitt_texture::load_image;
@@ -202,18 +204,17 @@ fn compute(args: &MetricsArgs, default_weights: Option<PathBuf>) -> Result<serde
     Ok(out)
 }
 
-/// The tensors of a torch state dict, by name (values as `f32`).
-/// Named tensors: (name, shape, values).
-type StateDict = Vec<(String, Vec<usize>, Vec<f32>)>;
-
-fn state_dict(path: &Path) -> Result<StateDict> {
-    let v = bitt_pickle::load_torch(path)?;
+/// The float tensors of a torch checkpoint's state dict (values as `f32`).
+fn state_dict(path: &Path) -> Result<StateDict, BittError> {
+    let v = bitt_pickle::load_torch(path).map_err(|e| BittError::Invalid(e.to_string()))?;
     let Value::Dict(items) = v else {
-        bail!(
-            "{}: the checkpoint holds a {}, expected a state dict",
-            path.display(),
-            v.type_name()
-        );
+        return Err(BittError::corrupt(
+            path,
+            format!(
+                "the checkpoint holds a {}, expected a state dict",
+                v.type_name()
+            ),
+        ));
     };
     let mut out = Vec::new();
     for (k, t) in items {
@@ -228,91 +229,18 @@ fn state_dict(path: &Path) -> Result<StateDict> {
     Ok(out)
 }
 
-/// Our tensor name for a name of the `lpips` package's state dict or of torchvision's VGG16.
-fn our_name(name: &str) -> Option<String> {
-    // lpips: lin{l}.model.1.weight, lins.{l}.model.1.weight, net.slice{s}.{idx}.{weight,bias}
-    if let Some(rest) = name.strip_prefix("lins.") {
-        let l = rest.strip_suffix(".model.1.weight")?;
-        return Some(format!("lin{l}.weight"));
-    }
-    if let Some(rest) = name.strip_prefix("lin") {
-        let l = rest.strip_suffix(".model.1.weight")?;
-        return Some(format!("lin{l}.weight"));
-    }
-    if let Some(rest) = name.strip_prefix("net.slice") {
-        let (_, tail) = rest.split_once('.')?;
-        return Some(format!("features.{tail}"));
-    }
-    // torchvision: features.{idx}.{weight,bias} (the classifier is not used).
-    name.starts_with("features.").then(|| name.to_string())
-}
-
 /// `bitt convert-lpips`.
 pub fn convert(args: &ConvertLpipsArgs) -> Result<()> {
-    type Tensors = std::collections::HashMap<String, (Vec<usize>, Vec<f32>)>;
-    fn add(tensors: &mut Tensors, path: &Path) -> Result<()> {
-        for (name, shape, data) in state_dict(path)? {
-            if let Some(ours) = our_name(&name) {
-                tensors.entry(ours).or_insert((shape, data));
-            }
-        }
-        Ok(())
-    }
-    let mut tensors = Tensors::new();
-    add(&mut tensors, &args.lin)?;
-    let needs_vgg = lpips::weight_names()
-        .iter()
-        .any(|(n, _)| n.starts_with("features.") && !tensors.contains_key(n));
-    if needs_vgg {
-        let vgg = match &args.vgg {
-            Some(p) => p.clone(),
-            None => {
-                let p = std::env::var_os("HOME")
-                    .map(PathBuf::from)
-                    .unwrap_or_default()
-                    .join(".cache/torch/hub/checkpoints/vgg16-397923af.pth");
-                if !p.is_file() {
-                    bail!(
-                        "{} holds no VGG16 backbone and {} does not exist; pass --vgg \
-                         vgg16-397923af.pth (from https://download.pytorch.org/models/\
-                         vgg16-397923af.pth)",
-                        args.lin.display(),
-                        p.display()
-                    );
-                }
-                p
-            }
-        };
-        add(&mut tensors, &vgg)?;
-    }
-    let mut ordered = Vec::new();
-    for (name, shape) in lpips::weight_names() {
-        let Some((s, data)) = tensors.remove(&name) else {
-            bail!(
-                "tensor {name} ({shape:?}) was found in none of the inputs ({}{})",
-                args.lin.display(),
-                args.vgg
-                    .as_ref()
-                    .map_or(String::new(), |p| format!(", {}", p.display()))
-            );
-        };
-        if s != shape {
-            bail!("tensor {name} has shape {s:?} in the inputs, expected {shape:?}");
-        }
-        ordered.push((name, shape, data));
-    }
-    let out = match &args.out {
-        Some(p) => p.clone(),
-        None => lpips::default_weights_path()
-            .context("no --out and no HOME to put ~/.cache/bitt/lpips_vgg.safetensors in")?,
-    };
-    lpips::save_weights(&out, &ordered)?;
-    // Read it back as LPIPS will.
-    LpipsVgg::load(&out, &burn::tensor::Device::flex())
-        .with_context(|| format!("checking {}", out.display()))?;
+    let done = lpips_convert::convert(
+        &args.lin,
+        args.vgg.as_deref(),
+        args.out.as_deref(),
+        state_dict,
+        &burn::tensor::Device::flex(),
+    )?;
     println!(
         "{}",
-        json!({"written": out.display().to_string(), "tensors": ordered.len()})
+        json!({"written": done.path.display().to_string(), "tensors": done.tensors})
     );
     Ok(())
 }
@@ -408,27 +336,5 @@ mod tests {
         );
         assert!(e.contains("gone.png"), "{e}");
         std::fs::remove_dir_all(&dir).ok();
-    }
-
-    #[test]
-    fn lpips_names_map_from_both_packages() {
-        assert_eq!(
-            our_name("lin3.model.1.weight").as_deref(),
-            Some("lin3.weight")
-        );
-        assert_eq!(
-            our_name("lins.0.model.1.weight").as_deref(),
-            Some("lin0.weight")
-        );
-        assert_eq!(
-            our_name("net.slice4.19.bias").as_deref(),
-            Some("features.19.bias")
-        );
-        assert_eq!(
-            our_name("features.28.weight").as_deref(),
-            Some("features.28.weight")
-        );
-        assert_eq!(our_name("classifier.0.weight"), None);
-        assert_eq!(our_name("scaling_layer.shift"), None);
     }
 }

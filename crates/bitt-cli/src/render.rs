@@ -8,6 +8,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, anyhow, bail};
+use bitt::outputs::{contact_sheet_on, fill_hidden_texels};
 use bitt_mesh::annotation::BITT_CROP_SIZE;
 use bitt_mesh::glam::{DMat3, DVec3};
 use bitt_mesh::{HandModel, HandPair, OrthographicCamera, PinholeCamera, Side, UvLayout};
@@ -205,7 +206,7 @@ fn load_models(args: &RenderArgs) -> Result<(HandPair, [UvLayout; 2])> {
 
 fn load_scene(args: &RenderArgs, models: &HandPair) -> Result<bitt_mesh::TwoHandScene> {
     if args.demo {
-        return Ok(crate::demo::demo_scene(models));
+        return Ok(bitt::demo::demo_scene(models));
     }
     let Some(path) = &args.annotation else {
         bail!("give --annotation FILE or --demo");
@@ -399,7 +400,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     )?;
     let mut outputs = Vec::new();
     if let Some(n) = args.views {
-        let grid = render_views(
+        let mut panels = render_views(
             n,
             &meshes,
             &vertex_tensors,
@@ -408,10 +409,15 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             &light,
             &settings,
         )?;
-        let figure = with_unwrap_row(grid, &full, &camera, &hands)?;
+        // Three columns; the unwrap row starts a row of its own.
+        panels.resize(n.div_ceil(3) * 3, vec![0.0; 3 * VIEW_SIZE * VIEW_SIZE]);
+        panels.extend(unwrap_row(&full, &camera, &hands)?);
+        let (data, height, width) = contact_sheet_on(&panels, VIEW_SIZE, VIEW_SIZE, 3, 0.0);
         outputs.push(Output {
             path: args.out.clone(),
-            ..figure
+            data,
+            width,
+            height,
         });
         write_all(&outputs)?;
         return Ok(());
@@ -545,7 +551,7 @@ pub fn image_diff(a: &Path, b: &Path) -> Result<()> {
 const VIEW_SIZE: usize = 256;
 
 /// `n` orthographic views around the hands (rotating about the camera's vertical axis), each
-/// lit from its own camera side, as a grid of up to 3 columns.
+/// lit from its own camera side, as `[3, VIEW_SIZE, VIEW_SIZE]` panels.
 fn render_views(
     n: usize,
     meshes: &[TexturedMesh],
@@ -554,15 +560,12 @@ fn render_views(
     textures: &[Tensor<3>],
     light: &LightValues,
     settings: &RenderSettings,
-) -> Result<Output> {
+) -> Result<Vec<Vec<f32>>> {
     let device = vertices[0].device();
     let scene = Scene::new(&[&meshes[0], &meshes[1]])?;
     let points: Vec<DVec3> = hands.iter().flat_map(|h| h.vertices.clone()).collect();
     let centre = points.iter().copied().sum::<DVec3>() / points.len() as f64;
-    let cols = n.min(3);
-    let rows = n.div_ceil(cols);
-    let (gw, gh) = (cols * VIEW_SIZE, rows * VIEW_SIZE);
-    let mut grid = vec![0.0f32; 3 * gw * gh];
+    let mut panels = Vec::with_capacity(n);
     for k in 0..n {
         let angle = std::f64::consts::TAU * k as f64 / n as f64;
         let rotation = DMat3::from_rotation_y(angle);
@@ -590,61 +593,27 @@ fn render_views(
             &view_light.to_light(&device),
             settings,
         )?;
-        let img = host(r.image)?;
-        blit(
-            &mut grid,
-            [gw, gh],
-            &img,
-            (k / cols) * VIEW_SIZE,
-            (k % cols) * VIEW_SIZE,
-        );
+        panels.push(host(r.image)?);
     }
-    Ok(Output {
-        path: PathBuf::new(),
-        data: grid,
-        width: gw,
-        height: gh,
-    })
+    Ok(panels)
 }
 
-/// Copies a `[3, VIEW_SIZE, VIEW_SIZE]` panel into a `[3, gh, gw]` grid at row `r0`, column
-/// `c0` (pixels).
-fn blit(grid: &mut [f32], [gw, gh]: [usize; 2], panel: &[f32], r0: usize, c0: usize) {
-    let hw = VIEW_SIZE * VIEW_SIZE;
-    for c in 0..3 {
-        for y in 0..VIEW_SIZE {
-            let src = &panel[c * hw + y * VIEW_SIZE..c * hw + (y + 1) * VIEW_SIZE];
-            let dst = c * gw * gh + (r0 + y) * gw + c0;
-            grid[dst..dst + VIEW_SIZE].copy_from_slice(src);
-        }
-    }
-}
-
-/// Adds a row under a views grid: the scene camera's render, then, per hand, that render
+/// The row under a views grid: the scene camera's render, then, per hand, that render
 /// unwrapped onto the hand's UV layout (`VIEW_SIZE` texels a side): visible texels in their
 /// unwrapped colour, hidden texels of the layout dark grey, unused texels black.
-fn with_unwrap_row(
-    grid: Output,
+fn unwrap_row(
     full: &bitt_render::scene::SceneRender,
     camera: &Camera,
     hands: &[Hand],
-) -> Result<Output> {
-    let (gw, gh) = (grid.width.max(3 * VIEW_SIZE), grid.height + VIEW_SIZE);
-    let mut data = vec![0.0f32; 3 * gw * gh];
-    for c in 0..3 {
-        for y in 0..grid.height {
-            let src = &grid.data[(c * grid.height + y) * grid.width..][..grid.width];
-            data[(c * gh + y) * gw..][..grid.width].copy_from_slice(src);
-        }
-    }
+) -> Result<Vec<Vec<f32>>> {
     let image = full.image.clone();
     let [_, h, w] = image.dims();
     anyhow::ensure!(
         [h, w] == [VIEW_SIZE, VIEW_SIZE],
         "--views needs a {VIEW_SIZE}x{VIEW_SIZE} scene camera for its unwrap row (got {w}x{h})"
     );
-    blit(&mut data, [gw, gh], &host(image.clone())?, grid.height, 0);
-    for (i, hand) in hands.iter().enumerate() {
+    let mut panels = vec![host(image.clone())?];
+    for hand in hands {
         let layout = TextureLayout::from_uv(&hand.uv, VIEW_SIZE, VIEW_SIZE, 0)?;
         let surface = TexelSurface::new(&layout, &hand.model.faces, hand.model.num_vertices())?;
         let u = unwrap(
@@ -655,30 +624,11 @@ fn with_unwrap_row(
             &full.raster,
             &UnwrapSettings::default(),
         )?;
-        let t = layout.num_texels();
         let mut texels = host(u.texels)?;
-        for (k, &v) in u.visible_host.iter().enumerate() {
-            if !v {
-                for c in 0..3 {
-                    texels[c * t + k] = 0.25;
-                }
-            }
-        }
-        let panel = layout.compact_to_image(&texels, [0.0; 3])?;
-        blit(
-            &mut data,
-            [gw, gh],
-            &panel,
-            grid.height,
-            (i + 1) * VIEW_SIZE,
-        );
+        fill_hidden_texels(&mut texels, &u.visible_host, 0.25);
+        panels.push(layout.compact_to_image(&texels, [0.0; 3])?);
     }
-    Ok(Output {
-        path: PathBuf::new(),
-        data,
-        width: gw,
-        height: gh,
-    })
+    Ok(panels)
 }
 
 #[cfg(test)]

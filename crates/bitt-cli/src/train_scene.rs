@@ -715,7 +715,7 @@ const RUN_NAMES: [&str; 20] = [
     files::REFINE_OVERLAY,
     FIT_RECORD,
     FIT_OVERLAY,
-    REAL_SCORES,
+    files::REAL_SCORES,
     "input.json",
     "input",
     "textures",
@@ -972,7 +972,7 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
             if !(scene.novel_views.is_empty() && scene.novel_poses.is_empty()) =>
         {
             let scores = score_real(&trainer, scene)?;
-            bitt::outputs::write_json(&out.join(REAL_SCORES), &scores)?;
+            bitt::run::write_real_scores(&out, &scores)?;
             Some(scores)
         }
         _ => None,
@@ -994,9 +994,6 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
     }
     Ok(())
 }
-
-/// Scores of a real multi-view run against the photographs of its novel views and poses.
-pub const REAL_SCORES: &str = "real_scores.json";
 
 fn print_summary(out: &Path, s: &bitt::run::RunSummary, real: Option<&RealScores>, wall: f64) {
     println!(
@@ -1418,7 +1415,8 @@ mod tests {
         ]))
         .unwrap();
         let scores: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join(REAL_SCORES)).unwrap()).unwrap();
+            serde_json::from_str(&std::fs::read_to_string(out.join(files::REAL_SCORES)).unwrap())
+                .unwrap();
         assert_eq!(scores["novel_poses"]["count"], 2);
         assert!(out.join("input/pose_01.png").is_file());
         let input = RealInput::read(&out).unwrap();

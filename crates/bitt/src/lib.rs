@@ -3,12 +3,14 @@
 //!
 //! - [`config`]: the trainer's configuration and the `paper` / `quick` / `tiny` presets.
 //! - [`assets`]: hand models, render meshes, texture layouts; one view's geometry.
+//! - [`demo`]: the built-in two-hand demo scene (procedural or any other hands).
 //! - [`input`]: cropping and resizing input images to the preset's size.
 //! - [`pipeline`]: the forward pass (scene estimation, coarse stage, fine stage).
 //! - [`losses`]: the paper's loss (eq. 6-10).
 //! - [`optim`], [`checkpoint`], [`trainer`]: Adam, checkpoints, the per-scene trainer.
 //! - [`metrics`], [`evaluate`]: image and texture metrics, renders at other views and poses.
-//! - [`lpips`]: LPIPS-VGG with user-provided weights (unavailable without them).
+//! - [`lpips`]: LPIPS-VGG with user-provided weights (unavailable without them);
+//!   [`lpips_convert`] writes its weights file from the torch checkpoints.
 //! - [`outputs`], [`run`]: the run folder (textures, renders, avatar, metrics, report).
 //! - [`avatar_export`]: the avatar files: rigged `avatar.glb`, `avatar_static.glb`, OBJ.
 //! - [`saved`]: a trained run read back from its folder (either kind), for re-rendering and
@@ -27,6 +29,7 @@ pub mod baselines;
 pub mod benchmark;
 pub mod checkpoint;
 pub mod config;
+pub mod demo;
 mod error;
 pub mod evaluate;
 pub mod fit;
@@ -35,6 +38,7 @@ pub mod hand_priors;
 pub mod input;
 pub mod losses;
 pub mod lpips;
+pub mod lpips_convert;
 pub mod metrics;
 pub mod optim;
 pub mod outputs;

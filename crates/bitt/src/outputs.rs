@@ -54,10 +54,22 @@ pub fn contact_sheet(
     w: usize,
     columns: usize,
 ) -> (Vec<f32>, usize, usize) {
+    contact_sheet_on(panels, h, w, columns, 0.2)
+}
+
+/// [`contact_sheet`] on a `background` of that value in every channel (also the cells of
+/// the last row no panel fills): `(image [3, gh, gw], gh, gw)`.
+pub fn contact_sheet_on(
+    panels: &[Vec<f32>],
+    h: usize,
+    w: usize,
+    columns: usize,
+    background: f32,
+) -> (Vec<f32>, usize, usize) {
     let columns = columns.max(1);
     let rows = panels.len().div_ceil(columns).max(1);
     let (gh, gw) = (rows * h, columns * w);
-    let mut out = vec![0.2f32; 3 * gh * gw];
+    let mut out = vec![background; 3 * gh * gw];
     for (k, p) in panels.iter().enumerate() {
         let (r0, c0) = ((k / columns) * h, (k % columns) * w);
         for ch in 0..3 {
@@ -69,6 +81,17 @@ pub fn contact_sheet(
         }
     }
     (out, gh, gw)
+}
+
+/// Sets every channel of the texels of a compact texture `[3, T]` that `visible` marks
+/// hidden to `value` (a figure's way of showing which texels an image did not see).
+pub fn fill_hidden_texels(texels: &mut [f32], visible: &[bool], value: f32) {
+    let t = visible.len();
+    for (k, _) in visible.iter().enumerate().filter(|(_, v)| !**v) {
+        for c in 0..3 {
+            texels[c * t + k] = value;
+        }
+    }
 }
 
 /// Both hands as a textured glTF binary (`avatar.glb`).
@@ -166,6 +189,26 @@ mod tests {
         ] {
             assert_eq!(base64(i.as_bytes()), o);
         }
+    }
+
+    #[test]
+    fn contact_sheet_places_panels_row_by_row() {
+        let panel = |v: f32| vec![v; 3 * 2 * 2];
+        let (img, gh, gw) = contact_sheet_on(&[panel(1.0), panel(2.0), panel(3.0)], 2, 2, 2, 0.0);
+        assert_eq!((gh, gw), (4, 4));
+        // Channel 1, rows 0..4: [1 1 2 2], [1 1 2 2], [3 3 0 0], [3 3 0 0].
+        let ch1 = &img[16..32];
+        assert_eq!(&ch1[..4], &[1.0, 1.0, 2.0, 2.0]);
+        assert_eq!(&ch1[8..12], &[3.0, 3.0, 0.0, 0.0]);
+        let (grey, _, _) = contact_sheet(&[panel(1.0)], 2, 2, 2);
+        assert_eq!(grey[2], 0.2);
+    }
+
+    #[test]
+    fn hidden_texels_are_filled() {
+        let mut t = vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
+        fill_hidden_texels(&mut t, &[true, false], 0.25);
+        assert_eq!(t, [1.0, 0.25, 3.0, 0.25, 5.0, 0.25]);
     }
 
     #[test]

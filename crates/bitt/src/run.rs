@@ -56,6 +56,13 @@ pub mod files {
     pub const REFINE: &str = "refine.json";
     /// The photo with the mesh outlines before (red) and after (green) refinement.
     pub const REFINE_OVERLAY: &str = "overlay.png";
+    /// Scores of a real multi-view run against the photographs of its novel views and poses.
+    pub const REAL_SCORES: &str = "real_scores.json";
+}
+
+/// Writes a real run's scores ([`crate::real::score_real`]) to [`files::REAL_SCORES`].
+pub fn write_real_scores(out: &Path, scores: &crate::real::RealScores) -> Result<(), BittError> {
+    write_json(&out.join(files::REAL_SCORES), scores)
 }
 
 /// Writes a refinement's record into a run folder: `refine.json` (the report and whatever

@@ -11,7 +11,8 @@
 //!
 //! Files: `methods.rs` runs the methods on one scene and scores them, `aggregate.rs`
 //! averages scene results and pairs methods scene by scene, `markdown.rs` writes
-//! `results.md` with the claims.
+//! `results.md` with the claims, `folder.rs` keeps an evaluation's folder (result files per
+//! scene and setting, shards, resume, merging).
 
 use std::collections::BTreeMap;
 
@@ -22,10 +23,15 @@ use crate::metrics::ImageMetrics;
 pub use crate::metrics::TexelErrors;
 
 mod aggregate;
+mod folder;
 mod markdown;
 mod methods;
 
 pub use aggregate::{MeanMetrics, MethodSummary, Paired, Summary, TexelStatsMean, summarize};
+pub use folder::{
+    EvalPlan, interhand_scene_id, merge, parse_shard, pending, prepare_folder, result_path,
+    shard_seeds, trainings_per_scene, write_scene, write_sheet,
+};
 pub use markdown::{claims, results_markdown};
 pub use methods::{ContactSheets, SceneSheets, SheetImages, evaluate_real_scene, evaluate_scene};
 

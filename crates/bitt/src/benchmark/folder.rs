@@ -1,0 +1,330 @@
+//! The evaluation folder: one result file per scene and mesh setting, shards, resume, merged tables.
+
+use std::path::{Path, PathBuf};
+
+use bitt_mesh::export::write_atomically;
+
+use super::{
+    ContactSheets, MeshSetting, Method, SCENE_RESULT_FORMAT, SceneResult, results_markdown,
+    summarize,
+};
+use crate::BittError;
+use crate::baselines::BaselineConfig;
+use crate::config::TrainConfig;
+use crate::outputs::{contact_sheet, write_json, write_png};
+
+/// Parses a shard `i/N` (0-based): scene `k` belongs to shard `k % N`.
+pub fn parse_shard(s: &str) -> Result<(usize, usize), BittError> {
+    let invalid = |why: String| BittError::Invalid(format!("--shard {s}: {why}"));
+    let (i, n) = s
+        .split_once('/')
+        .ok_or_else(|| invalid("expected i/N".into()))?;
+    let number = |x: &str| {
+        x.trim()
+            .parse::<usize>()
+            .map_err(|e| invalid(e.to_string()))
+    };
+    let (i, n) = (number(i)?, number(n)?);
+    if n == 0 || i >= n {
+        return Err(invalid("need 0 <= i < N".into()));
+    }
+    Ok((i, n))
+}
+
+/// `scenes/{setting}-{seed:016x}.json`: the result file of one scene and mesh setting.
+pub fn result_path(out: &Path, setting: MeshSetting, seed: u64) -> PathBuf {
+    out.join("scenes")
+        .join(format!("{}-{seed:016x}.json", setting.key()))
+}
+
+/// The seeds of the first `scenes` benchmark scenes that belong to shard `(i, N)`.
+pub fn shard_seeds(scenes: usize, (shard, shards): (usize, usize)) -> Vec<u64> {
+    bitt_synth::benchmark_seeds(scenes)
+        .into_iter()
+        .enumerate()
+        .filter(|(k, _)| k % shards == shard)
+        .map(|(_, seed)| seed)
+        .collect()
+}
+
+/// The scene/setting pairs without a result file in `out` yet (finished ones are skipped).
+pub fn pending(out: &Path, seeds: &[u64], settings: &[MeshSetting]) -> Vec<(u64, MeshSetting)> {
+    seeds
+        .iter()
+        .flat_map(|&seed| settings.iter().map(move |&s| (seed, s)))
+        .filter(|&(seed, s)| !result_path(out, s, seed).is_file())
+        .collect()
+}
+
+/// BiTT trainings per scene (the HTML baseline trains one when no BiTT variant does): the
+/// unit of an evaluation's progress, with the iterations of each.
+pub fn trainings_per_scene(methods: &[Method], config: &TrainConfig) -> usize {
+    methods
+        .iter()
+        .filter(|m| m.bitt_config(config).is_some())
+        .count()
+        .max(usize::from(methods.contains(&Method::Html)))
+}
+
+/// A stable id of an InterHand2.6M scene (FNV-1a of split, capture, frame and camera): the
+/// name of its result file.
+pub fn interhand_scene_id(split: &str, capture: i64, frame: i64, camera: &str) -> u64 {
+    format!("interhand/{split}/{capture}/{frame}/{camera}")
+        .bytes()
+        .fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+            (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+        })
+}
+
+/// What an evaluation runs: written to `config.json` of its folder.
+#[derive(Debug, Clone, Copy)]
+pub struct EvalPlan<'a> {
+    /// Every BiTT training.
+    pub train: &'a TrainConfig,
+    /// The HARP-like and S2Hand-like baselines.
+    pub baseline: &'a BaselineConfig,
+    /// The methods compared.
+    pub methods: &'a [Method],
+    /// The mesh settings.
+    pub settings: &'a [MeshSetting],
+    /// How many scenes.
+    pub scenes: usize,
+    /// Where the scenes come from (`synthetic`, `interhand SPLIT ROOT`).
+    pub dataset: &'a str,
+}
+
+/// Creates `out/scenes/` and writes the plan to `out/config.json`.
+pub fn prepare_folder(out: &Path, plan: &EvalPlan<'_>) -> Result<(), BittError> {
+    let scenes = out.join("scenes");
+    std::fs::create_dir_all(&scenes).map_err(|e| BittError::io(&scenes, e))?;
+    write_json(
+        &out.join("config.json"),
+        &serde_json::json!({
+            "train": plan.train,
+            "baseline": plan.baseline,
+            "methods": plan.methods.iter().map(|m| m.key()).collect::<Vec<_>>(),
+            "settings": plan.settings.iter().map(|s| s.key()).collect::<Vec<_>>(),
+            "scenes": plan.scenes,
+            "dataset": plan.dataset,
+        }),
+    )
+}
+
+/// Writes one evaluated scene: its contact sheet ([`write_sheet`]), then its result file
+/// ([`result_path`]), which marks it finished.
+pub fn write_scene(
+    out: &Path,
+    result: &SceneResult,
+    input: &[f32],
+    sheets: &ContactSheets,
+    size: usize,
+) -> Result<(), BittError> {
+    let name = format!("{}-{:016x}", result.setting.key(), result.seed);
+    write_sheet(out, &name, input, sheets, size)?;
+    write_json(&result_path(out, result.setting, result.seed), result)
+}
+
+/// `sheets/{name}.png`: the input, the ground truth and each method at the first novel view
+/// (top row) and the first novel pose (bottom row); `sheets/columns.txt` names the columns.
+pub fn write_sheet(
+    out: &Path,
+    name: &str,
+    input: &[f32],
+    sheets: &ContactSheets,
+    size: usize,
+) -> Result<(), BittError> {
+    let (Some(view), Some(pose)) = (&sheets.view, &sheets.pose) else {
+        return Ok(());
+    };
+    let mut panels = vec![input.to_vec(), view.clone()];
+    panels.extend(sheets.methods.iter().map(|(_, s)| s.0.clone()));
+    panels.push(input.to_vec());
+    panels.push(pose.clone());
+    panels.extend(sheets.methods.iter().map(|(_, s)| s.1.clone()));
+    let (img, h, w) = contact_sheet(&panels, size, size, 2 + sheets.methods.len());
+    let dir = out.join("sheets");
+    std::fs::create_dir_all(&dir).map_err(|e| BittError::io(&dir, e))?;
+    write_png(&dir.join(format!("{name}.png")), &img, h, w)?;
+    let legend: Vec<&str> = ["input", "ground truth"]
+        .into_iter()
+        .chain(sheets.methods.iter().map(|(m, _)| m.key()))
+        .collect();
+    write_atomically(
+        &dir.join("columns.txt"),
+        format!("{}\n", legend.join(" | ")).as_bytes(),
+    )?;
+    Ok(())
+}
+
+/// Reads every scene result under `dirs[k]/scenes/` (the first of each scene and setting
+/// wins) and writes `results.json` and `results.md` into `dirs[0]`; returns `results.md`.
+pub fn merge(dirs: &[PathBuf]) -> Result<String, BittError> {
+    let mut results: Vec<SceneResult> = Vec::new();
+    for dir in dirs {
+        for r in read_results(&dir.join("scenes"))? {
+            if !results
+                .iter()
+                .any(|x| x.seed == r.seed && x.setting == r.setting)
+            {
+                results.push(r);
+            }
+        }
+    }
+    let Some(out) = dirs.first().filter(|_| !results.is_empty()) else {
+        return Err(BittError::Invalid(format!(
+            "no scene results under {}",
+            dirs.first()
+                .map_or(PathBuf::new(), |d| d.join("scenes"))
+                .display()
+        )));
+    };
+    let summary = summarize(&results);
+    write_json(
+        &out.join("results.json"),
+        &serde_json::json!({
+            "summary": summary,
+            "scenes": results,
+        }),
+    )?;
+    let has_lpips = summary
+        .settings
+        .values()
+        .flat_map(|per| per.values())
+        .any(|m| {
+            [m.input_view, m.novel_views, m.novel_poses]
+                .iter()
+                .any(|x| x.is_some_and(|x| x.lpips.is_some()))
+        });
+    let note = if has_lpips {
+        "LPIPS-VGG from the user's weights (`bitt convert-lpips`), on images mapped to [-1, 1]"
+    } else {
+        "unavailable (no LPIPS weights; never estimated)"
+    };
+    let md = results_markdown(&summary, note);
+    write_atomically(&out.join("results.md"), md.as_bytes())?;
+    Ok(md)
+}
+
+/// The scene results in one `scenes/` folder, in file-name order.
+fn read_results(scenes: &Path) -> Result<Vec<SceneResult>, BittError> {
+    let entries = std::fs::read_dir(scenes).map_err(|e| BittError::io(scenes, e))?;
+    let mut paths: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "json"))
+        .collect();
+    paths.sort();
+    paths
+        .iter()
+        .map(|p| {
+            let text = std::fs::read_to_string(p).map_err(|e| BittError::io(p, e))?;
+            let r: SceneResult = serde_json::from_str(&text)
+                .map_err(|e| BittError::corrupt(p, format!("not a scene result: {e}")))?;
+            if r.format != SCENE_RESULT_FORMAT {
+                return Err(BittError::corrupt(
+                    p,
+                    format!("format {} (expected {SCENE_RESULT_FORMAT})", r.format),
+                ));
+            }
+            Ok(r)
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scratch(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("bitt-folder-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(dir.join("scenes")).unwrap();
+        dir
+    }
+
+    fn result(seed: u64, setting: MeshSetting, preset: &str) -> SceneResult {
+        SceneResult {
+            format: SCENE_RESULT_FORMAT.into(),
+            seed,
+            setting,
+            preset: preset.into(),
+            iterations: 1,
+            stats: bitt_synth::TexelStats::from_masks(&[true, false], &[true, true]).unwrap(),
+            methods: Default::default(),
+        }
+    }
+
+    #[test]
+    fn shards_parse_and_partition_the_scenes() {
+        assert_eq!(parse_shard("1/3").unwrap(), (1, 3));
+        assert_eq!(parse_shard(" 0 / 1 ").unwrap(), (0, 1));
+        for bad in ["3", "3/3", "0/0", "a/2", "1/b"] {
+            let e = parse_shard(bad).unwrap_err().to_string();
+            assert!(e.starts_with(&format!("--shard {bad}:")), "{e}");
+        }
+        let all = shard_seeds(5, (0, 1));
+        assert_eq!(all, bitt_synth::benchmark_seeds(5));
+        let mut parts: Vec<u64> = (0..2).flat_map(|i| shard_seeds(5, (i, 2))).collect();
+        assert_eq!(parts.len(), 5);
+        parts.sort();
+        let mut sorted = all.clone();
+        sorted.sort();
+        assert_eq!(parts, sorted);
+        assert_eq!(shard_seeds(5, (1, 2)), vec![all[1], all[3]]);
+    }
+
+    #[test]
+    fn interhand_ids_are_stable_and_distinct() {
+        let a = interhand_scene_id("test", 0, 10, "400262");
+        assert_eq!(a, interhand_scene_id("test", 0, 10, "400262"));
+        assert_ne!(a, interhand_scene_id("test", 1, 10, "400262"));
+        assert_ne!(a, interhand_scene_id("val", 0, 10, "400262"));
+    }
+
+    /// Finished scenes are skipped, and merging shard folders keeps the first result of each
+    /// scene and setting.
+    #[test]
+    fn resume_skips_finished_scenes_and_merge_dedups() {
+        let (a, b) = (scratch("a"), scratch("b"));
+        let settings = MeshSetting::ALL;
+        let done = result(7, MeshSetting::GtMesh, "first");
+        write_json(&result_path(&a, done.setting, done.seed), &done).unwrap();
+        assert_eq!(
+            pending(&a, &[7, 8], &settings),
+            vec![
+                (7, MeshSetting::NoisyMesh),
+                (8, MeshSetting::GtMesh),
+                (8, MeshSetting::NoisyMesh)
+            ]
+        );
+        for r in [
+            result(7, MeshSetting::GtMesh, "second"),
+            result(8, MeshSetting::GtMesh, "b"),
+        ] {
+            write_json(&result_path(&b, r.setting, r.seed), &r).unwrap();
+        }
+        merge(&[a.clone(), b.clone()]).unwrap();
+        let merged: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(a.join("results.json")).unwrap())
+                .unwrap();
+        let presets: Vec<&str> = merged["scenes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|s| s["preset"].as_str().unwrap())
+            .collect();
+        assert_eq!(presets, ["first", "b"]);
+        assert!(a.join("results.md").is_file());
+        // A wrong format is refused; an empty folder has nothing to merge.
+        let mut old = result(9, MeshSetting::GtMesh, "old");
+        old.format = "old".into();
+        write_json(&result_path(&b, old.setting, old.seed), &old).unwrap();
+        let e = merge(std::slice::from_ref(&b)).unwrap_err().to_string();
+        assert!(e.contains("expected bitt-eval-scene-1"), "{e}");
+        let empty = scratch("empty");
+        let e = merge(std::slice::from_ref(&empty)).unwrap_err().to_string();
+        assert!(e.contains("no scene results"), "{e}");
+        for d in [a, b, empty] {
+            let _ = std::fs::remove_dir_all(d);
+        }
+    }
+}
