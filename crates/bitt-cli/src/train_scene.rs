@@ -417,16 +417,7 @@ fn fresh(
         Some(keypoints) => Some(fit_synthetic(args, &mut scene, keypoints, device)?),
         None => None,
     };
-    eprintln!(
-        "fitting / loading the texture PCA ({} components)",
-        config.texture.components
-    );
-    let pca = texture_prior_with_progress(
-        &config,
-        cache,
-        &device.clone().inner(),
-        &crate::progress::PcaFitBar::new(),
-    )?;
+    let pca = procedural_prior(&config, cache, device)?;
     let refinement = match refine {
         Some(r) => {
             eprintln!("refining the given meshes against the training image");
@@ -589,16 +580,7 @@ fn resumed(
     } else {
         let scene = SynthScene::read(&dir.join(files::SCENE))
             .with_context(|| format!("--resume {}: the run's scene", dir.display()))?;
-        eprintln!(
-            "fitting / loading the texture PCA ({} components)",
-            config.texture.components
-        );
-        let pca = texture_prior_with_progress(
-            &config,
-            cache,
-            &device.clone().inner(),
-            &crate::progress::PcaFitBar::new(),
-        )?;
+        let pca = procedural_prior(&config, cache, device)?;
         let trainer = synthetic_trainer(&scene, &config, &pca, device)?;
         (trainer, Input::Synthetic(Box::new(scene)))
     };
@@ -993,6 +975,25 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The procedural texture PCA of `config.texture`, from the cache or fitted with a progress
+/// line and cached.
+fn procedural_prior(
+    config: &TrainConfig,
+    cache: Option<&Path>,
+    device: &burn::tensor::Device,
+) -> Result<bitt_texture::TexturePca> {
+    eprintln!(
+        "fitting / loading the texture PCA ({} components)",
+        config.texture.components
+    );
+    Ok(texture_prior_with_progress(
+        config,
+        cache,
+        &device.clone().inner(),
+        &crate::progress::PcaFitBar::new(),
+    )?)
 }
 
 fn print_summary(out: &Path, s: &bitt::run::RunSummary, real: Option<&RealScores>, wall: f64) {
