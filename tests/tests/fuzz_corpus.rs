@@ -1,29 +1,14 @@
 //! Replays the committed fuzz corpora (`fuzz/corpus/<target>/`, minimised with
 //! `cargo fuzz cmin`) through the entry points the fuzz targets (`fuzz/fuzz_targets/`) call:
 //! no input may panic, errors must name the file, and the seeds (`seed_*`, valid files built
-//! in code by [`write_fuzz_seeds`]) must still read. Needs neither the network nor
+//! in code by `bitt_tests::fuzz_seeds`, written by `cargo xtask fuzz-seeds`) must still read. Needs neither the network nor
 //! `../shared`.
 
-#[path = "../../fuzz/checks.rs"]
-mod checks;
-
 use std::panic::{AssertUnwindSafe, catch_unwind};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use bitt_mesh::annotation::{FrameInfo, TwoHandScene, hands_json};
-use bitt_mesh::glam::{DMat3, DVec2, DVec3};
-use bitt_mesh::interhand::InterHandPaths;
-use bitt_mesh::mano::to_safetensors;
-use bitt_mesh::model::{NUM_BETAS, NUM_POSE};
-use bitt_mesh::{HandModel, HandParams, HandPose, PinholeCamera, Side, UvLayout};
-use bitt_tests::pickle_writer::{write_protocol2, write_protocol4};
-use bitt_tests::real_fixture::{self, AnnotationOptions};
-
-fn corpus_dir(target: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../fuzz/corpus")
-        .join(target)
-}
+use bitt_tests::fuzz_checks as checks;
+use bitt_tests::fuzz_seeds::{corpus_dir, seeds};
 
 /// Feeds every file of a corpus to `read` (which returns whether it read the file, and
 /// panics on nothing); checks that every seed reads and returns how many files there are.
@@ -77,166 +62,6 @@ fn interhand_corpus_replays() {
 #[test]
 fn keypoints_corpus_replays() {
     replay("keypoints", checks::keypoints);
-}
-
-// -------------------------------------------------------------------------------------------
-// Seeds.
-
-/// The fuzz targets' one-vertex model, with a one-vertex UV layout when `uv`.
-fn tiny_model(side: Side, uv: bool) -> HandModel {
-    HandModel {
-        uv: uv.then(|| UvLayout {
-            uvs: vec![DVec2::new(0.25, 0.75)],
-            faces: vec![[0, 0, 0]],
-        }),
-        ..checks::tiny_model(side)
-    }
-}
-
-fn points(x0: f64) -> Vec<String> {
-    (0..21)
-        .map(|i| {
-            format!(
-                "[{}, {}, 0.9]",
-                x0 + 3.0 * f64::from(i),
-                100.0 + f64::from(i)
-            )
-        })
-        .collect()
-}
-
-/// The seeds of every target: small valid inputs built here (never copied from licensed
-/// data).
-fn seeds() -> Vec<(&'static str, String, Vec<u8>)> {
-    let mut out = Vec::new();
-    // Torch: the project's own checkpoints (`crates/bitt-pickle/tests-data`).
-    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../crates/bitt-pickle/tests-data");
-    for name in ["torch_zip.pth", "torch_legacy.pth"] {
-        let bytes = std::fs::read(data.join(name)).unwrap();
-        out.push(("torch", format!("seed_{name}"), bytes));
-    }
-    // MANO safetensors: one-vertex models, with and without a UV layout.
-    for (side, uv) in [(Side::Right, false), (Side::Left, true)] {
-        let bytes = to_safetensors(&tiny_model(side, uv)).unwrap();
-        out.push((
-            "mano_safetensors",
-            format!("seed_{side}_uv{uv}.safetensors"),
-            bytes,
-        ));
-    }
-    // Annotations: the demo pickle layout (protocols 4 and 2, one hand missing) and a
-    // hands.json.
-    let ann = real_fixture::annotation(AnnotationOptions::default());
-    out.push((
-        "annotation",
-        "seed_demo_p4.pkl".into(),
-        write_protocol4(&ann),
-    ));
-    let one = real_fixture::annotation(AnnotationOptions {
-        no_left: true,
-        ..Default::default()
-    });
-    out.push((
-        "annotation",
-        "seed_right_only_p2.pkl".into(),
-        write_protocol2(&one),
-    ));
-    let scene = TwoHandScene {
-        left: Some(HandParams {
-            root_rotation: DMat3::from_rotation_z(0.2),
-            pose: HandPose::AxisAngle(vec![0.01; NUM_POSE]),
-            betas: vec![0.1; NUM_BETAS],
-            trans: DVec3::new(0.1, 0.0, 0.0),
-        }),
-        right: None,
-        camera: PinholeCamera::new(
-            DMat3::from_cols_array(&[300.0, 0.0, 0.0, 0.0, 300.0, 0.0, 64.0, 60.0, 1.0]),
-            DMat3::IDENTITY,
-            DVec3::new(0.0, 0.0, 0.6),
-            128,
-            120,
-        )
-        .unwrap(),
-        frame: FrameInfo::default(),
-    };
-    let text = hands_json(&scene, &checks::tiny_pair()).unwrap();
-    out.push(("annotation", "seed_hands.json".into(), text.into_bytes()));
-    // InterHand: the miniature dataset of the InterHand tests, and a one-image one.
-    let root = real_fixture::scratch("fuzz-seeds");
-    real_fixture::write_mini_interhand(&root);
-    let paths = InterHandPaths::new(&root, "test");
-    let mut joined = Vec::new();
-    for (i, p) in [&paths.data, &paths.camera, &paths.mano]
-        .into_iter()
-        .enumerate()
-    {
-        if i > 0 {
-            joined.push(0);
-        }
-        joined.extend(std::fs::read(p).unwrap());
-    }
-    std::fs::remove_dir_all(&root).ok();
-    out.push(("interhand", "seed_mini.json".into(), joined));
-    let pose: Vec<String> = (0..48)
-        .map(|i| format!("{}", 0.01 * f64::from(i)))
-        .collect();
-    let hand = format!(
-        "{{\"pose\":[{}],\"shape\":[0,0,0,0,0,0,0,0,0,0],\"trans\":[0,0,0]}}",
-        pose.join(",")
-    );
-    let one = format!(
-        "{{\"images\":[{{\"id\":1,\"file_name\":\"a.jpg\",\"width\":334,\"height\":512,\
-         \"capture\":7,\"camera\":400262,\"frame_idx\":3}}],\"annotations\":[{{\"image_id\":1,\
-         \"bbox\":[1,2,30,40],\"hand_type\":\"interacting\",\"hand_type_valid\":true}}]}}\0\
-         {{\"7\":{{\"campos\":{{\"400262\":[100,-50,1000]}},\"camrot\":{{\"400262\":\
-         [[1,0,0],[0,1,0],[0,0,1]]}},\"focal\":{{\"400262\":[1200,1210]}},\"princpt\":\
-         {{\"400262\":[167,256]}}}}}}\0{{\"7\":{{\"3\":{{\"left\":{hand},\"right\":{hand}}}}}}}"
-    );
-    out.push(("interhand", "seed_one.json".into(), one.into_bytes()));
-    // Keypoints (first byte: the options, 0 = guess the format, no image size).
-    let (l, r) = (points(100.0), points(300.0));
-    let openpose = format!(
-        "{{\"version\":1.3,\"people\":[{{\"hand_left_keypoints_2d\":[{}],\
-         \"hand_right_keypoints_2d\":[{}]}}]}}",
-        l.join(",").replace(['[', ']'], ""),
-        r.join(",").replace(['[', ']'], "")
-    );
-    let plain = format!("{{\"left\": [{}], \"right\": null}}", l.join(", "));
-    let lms: Vec<String> = (0..21)
-        .map(|i| {
-            format!(
-                "{{\"x\": {}, \"y\": 0.5, \"z\": -0.01}}",
-                0.02 * f64::from(i)
-            )
-        })
-        .collect();
-    let mediapipe = format!(
-        "{{\"handedness\": [[{{\"index\": 0, \"score\": 0.97, \"display_name\": \"\", \
-         \"category_name\": \"Left\"}}]], \"hand_landmarks\": [[{}]]}}",
-        lms.join(", ")
-    );
-    for (name, sel, text) in [
-        ("openpose", 0u8, openpose),
-        ("plain", 0, plain),
-        ("mediapipe", 4, mediapipe), // 640 x 480, guessed format
-    ] {
-        let bytes = [vec![sel], text.into_bytes()].concat();
-        out.push(("keypoints", format!("seed_{name}.json"), bytes));
-    }
-    out
-}
-
-/// Writes the seeds into the corpora (run on demand:
-/// `cargo test --release -p bitt-tests --test fuzz_corpus write_fuzz_seeds -- --ignored`);
-/// the `from_bytes` seeds come from `bitt-pickle`'s `write_fuzz_seed_corpus`.
-#[test]
-#[ignore = "writes files into fuzz/corpus; run on demand"]
-fn write_fuzz_seeds() {
-    for (target, name, bytes) in seeds() {
-        let dir = corpus_dir(target);
-        std::fs::create_dir_all(&dir).unwrap();
-        std::fs::write(dir.join(name), bytes).unwrap();
-    }
 }
 
 /// The seeds are valid inputs of their readers (so the fuzzers start from real structure).

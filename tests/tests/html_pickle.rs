@@ -297,7 +297,10 @@ fn broken_html_pickles_give_named_errors() {
         write(&p, &write_protocol2(&model_pickle(&raw, skip)));
         let e = load_html_model_sized(&p, S).unwrap_err();
         let msg = e.to_string();
-        assert!(matches!(e, TextureError::Format { .. }), "{name}: {msg}");
+        assert!(
+            matches!(e, TextureError::File(bitt_mesh::FileError::Format { .. })),
+            "{name}: {msg}"
+        );
         assert!(
             msg.contains(&format!("{name}.pkl")) && msg.contains(want),
             "{name}: {msg}"
@@ -434,7 +437,10 @@ fn convert_html_writes_a_loadable_safetensors_file() {
     assert_eq!(model.texture(&a).unwrap(), direct.texture(&a).unwrap());
     // A folder without a model.
     let e = convert_html(&dir.join("nothing"), &dir.join("out2")).unwrap_err();
-    assert!(matches!(e, TextureError::Io { .. }), "{e}");
+    assert!(
+        matches!(e, TextureError::File(bitt_mesh::FileError::Io { .. })),
+        "{e}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -4,8 +4,12 @@
 use bitt_pickle::{ArrayData, CscMatrix, NdArray, Value, from_bytes};
 use bitt_tests::pickle_writer::{PyValue, write_protocol2, write_protocol4};
 
-/// C-order elements of an array whose `data` is listed in Fortran order.
-fn fortran_to_c<T: Copy>(shape: &[usize], data: &[T]) -> Vec<T> {
+/// C-order elements of an array whose `data` is listed in Fortran order when `fortran`
+/// (else already in C order).
+fn c_order<T: Copy>(shape: &[usize], data: &[T], fortran: bool) -> Vec<T> {
+    if !fortran {
+        return data.to_vec();
+    }
     let n: usize = shape.iter().product();
     assert_eq!(n, data.len());
     let mut f_strides = vec![1usize; shape.len()];
@@ -59,26 +63,12 @@ fn expected(v: &PyValue, proto: u8) -> Value {
             shape,
             data,
             fortran,
-        } => {
-            let d = if *fortran {
-                fortran_to_c(shape, data)
-            } else {
-                data.clone()
-            };
-            arr(shape, ArrayData::F64(d))
-        }
+        } => arr(shape, ArrayData::F64(c_order(shape, data, *fortran))),
         PyValue::NdArrayI64 {
             shape,
             data,
             fortran,
-        } => {
-            let d = if *fortran {
-                fortran_to_c(shape, data)
-            } else {
-                data.clone()
-            };
-            arr(shape, ArrayData::I64(d))
-        }
+        } => arr(shape, ArrayData::I64(c_order(shape, data, *fortran))),
         PyValue::NdArrayU32 { shape, data } => arr(shape, ArrayData::U32(data.clone())),
         PyValue::NdArrayF32 { shape, data } => arr(shape, ArrayData::F32(data.clone())),
         PyValue::NdArrayI32 { shape, data } => arr(shape, ArrayData::I32(data.clone())),

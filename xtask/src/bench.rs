@@ -18,7 +18,7 @@
 //! printed, with a clear note. Each side reports the best of its runs.
 //!
 //! - `bench render [--runs N]`: the renderer's stages forward and backward on flex and on
-//!   wgpu (`bitt bench-render`), wgpu against flex; see `bench_render.rs`.
+//!   wgpu (the `bench_render` example of `bitt`), wgpu against flex; see `bench_render.rs`.
 //!
 //! New benchmarks are another arm in [`bench`].
 

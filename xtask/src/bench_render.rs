@@ -1,11 +1,12 @@
-//! `cargo xtask bench render [--runs N]`: the renderer's per-stage timings (`bitt
-//! bench-render`) on flex and on wgpu, as a table with wgpu/flex ratios and as JSON.
+//! `cargo xtask bench render [--runs N]`: the renderer's per-stage timings (the example
+//! `crates/bitt/examples/bench_render.rs`) on flex and on wgpu, as a table with wgpu/flex
+//! ratios and as JSON.
 
 use std::process::Command;
 
 use anyhow::{Context, Result, bail};
 
-/// Runs `bitt bench-render` on flex then wgpu and prints the table and the JSON.
+/// Runs the `bench_render` example on flex then wgpu and prints the table and the JSON.
 pub fn run(args: &[String]) -> Result<()> {
     let runs = match args {
         [] => "5".to_string(),
@@ -15,26 +16,26 @@ pub fn run(args: &[String]) -> Result<()> {
         }
         _ => bail!("usage: cargo xtask bench render [--runs N]"),
     };
-    let bin = crate::build_bitt()?;
+    let bin = crate::build_example("bench_render")?;
     let runtime_dir = crate::runtime_dir();
     let mut results = Vec::new();
     for device in ["flex", "wgpu"] {
         eprintln!("bench render: timing on {device} ...");
         let out = Command::new(&bin)
-            .args(["bench-render", "--device", device, "--runs", &runs])
+            .args(["--device", device, "--runs", &runs])
             .env("XDG_RUNTIME_DIR", &runtime_dir)
             .output()
-            .context("running bitt bench-render")?;
+            .context("running the bench_render example")?;
         if !out.status.success() {
             bail!(
-                "bitt bench-render --device {device} failed ({}):\n{}",
+                "bench_render --device {device} failed ({}):\n{}",
                 out.status,
                 String::from_utf8_lossy(&out.stderr)
             );
         }
         let text = String::from_utf8_lossy(&out.stdout);
         let v: serde_json::Value = serde_json::from_str(text.trim())
-            .with_context(|| format!("bitt bench-render --device {device} printed {text}"))?;
+            .with_context(|| format!("bench_render --device {device} printed {text}"))?;
         results.push((device, v));
     }
     let (flex, wgpu) = (&results[0].1, &results[1].1);
@@ -74,6 +75,24 @@ pub fn run(args: &[String]) -> Result<()> {
             ms(&t["cpu_core"]),
             ms(&t["overhead"]),
             ms(&t["clip_readback"]),
+        );
+    }
+    for (device, v) in &results {
+        let (r, d) = (&v["host_readbacks"], &v["rasterize_dense"]);
+        println!(
+            "host readbacks per rasterization on {device:4}: `rasterize` {} (before), \
+             `rasterize_dense` {} (after; {} kernel, {:.2} ms, {} face ids differ from the CPU \
+             core)",
+            r["rasterize"],
+            r["rasterize_dense"],
+            d["kernel"].as_str().unwrap_or("?"),
+            ms(&d["forward"]),
+            d["face_ids_differing_from_cpu_core"],
+        );
+        println!(
+            "host readbacks of a fixed-view training render on {device:4}: `SceneGeometry::new` \
+             {} (once per view), `shade` {} (every step)",
+            r["scene_geometry_new"], r["shade_step"],
         );
     }
     let json = serde_json::json!({ "flex": flex, "wgpu": wgpu });

@@ -11,7 +11,7 @@ use bitt::benchmark::{
     parse_shard, pending, prepare_folder, result_path, shard_seeds, trainings_per_scene,
     write_scene,
 };
-use bitt::real::{interhand_views, load_models, real_trainer};
+use bitt::real::{interhand_views, load_models, real_trainer, sources};
 use bitt::run::texture_prior_with_progress;
 use bitt::{Observer, Progress, TrainConfig};
 use bitt_mesh::interhand::{InterHandDataset, InterHandSelection};
@@ -20,7 +20,7 @@ use bitt_synth::{BENCHMARK_SCENES, MeshNoise, SynthConfig};
 
 use crate::device::DeviceName;
 use crate::progress::ProgressLine;
-use crate::train_scene::{sources, training_config};
+use crate::train_scene::training_config;
 use bitt::lpips::LpipsVgg;
 
 /// Where the evaluated scenes come from.
@@ -148,33 +148,8 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             .filter(|&n| n >= 1)
             .with_context(|| format!("--scenes {n}: expected a positive number or `all`"))?,
     };
-    let mut methods: Vec<Method> = if args.methods.is_empty() {
-        Method::ALL
-            .into_iter()
-            .filter(|m| *m != Method::BittRefined)
-            .collect()
-    } else {
-        args.methods
-            .iter()
-            .map(|k| {
-                Method::from_key(k.trim()).with_context(|| {
-                    format!(
-                        "--methods: unknown method `{k}` (known: {})",
-                        Method::ALL.map(|m| m.key()).join(", ")
-                    )
-                })
-            })
-            .collect::<Result<_>>()?
-    };
-    if args.refine_mesh && !methods.contains(&Method::BittRefined) {
-        methods.push(Method::BittRefined);
-    }
-    let settings: Vec<MeshSetting> = match args.mesh.as_str() {
-        "both" => MeshSetting::ALL.to_vec(),
-        "gt-mesh" => vec![MeshSetting::GtMesh],
-        "noisy-mesh" => vec![MeshSetting::NoisyMesh],
-        other => bail!("--mesh {other}: expected both, gt-mesh or noisy-mesh"),
-    };
+    let methods = Method::parse_list(&args.methods, args.refine_mesh)?;
+    let settings = MeshSetting::parse_choice(&args.mesh)?;
     let (shard, shards) = match &args.shard {
         Some(s) => parse_shard(s)?,
         None => (0, 1),
@@ -440,13 +415,8 @@ mod tests {
     use super::*;
     use bitt::benchmark::SceneResult;
     use bitt_tests::real_fixture::{scratch, write_mini_interhand};
-    use clap::Parser;
 
-    #[derive(Debug, Parser)]
-    struct Cli {
-        #[command(flatten)]
-        args: EvalArgs,
-    }
+    type Cli = crate::test_args::Parsed<EvalArgs>;
 
     fn s(p: &Path) -> &str {
         p.to_str().unwrap()

@@ -6,10 +6,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use bitt::fit::{
-    FitConfig, FitObserver, FitProgress, FitScores, KeypointSource, check_fit_out, fit_keypoints,
-    fit_photo, parse_intrinsics, score_fit, synthetic_keypoints, write_fit_outputs,
+    FitConfig, FitObserver, FitProgress, KeypointSource, SyntheticFitSettings, check_fit_out,
+    fit_eval_summary, fit_photo, fit_synthetic_scene, parse_intrinsics, write_fit_outputs,
 };
-use bitt_mesh::PinholeCamera;
 use bitt_mesh::keypoints::KeypointFormat;
 use bitt_nets::Preset;
 use bitt_synth::SynthScene;
@@ -192,18 +191,6 @@ impl FitObserver for FitBar {
     }
 }
 
-/// One synthetic scene's result.
-#[derive(Debug, serde::Serialize)]
-struct SceneResult {
-    scene: String,
-    scores: FitScores,
-    residual_px: f64,
-    seconds: f64,
-    dropped: usize,
-    notes: Vec<String>,
-    hands: Vec<bitt::fit::HandFitReport>,
-}
-
 fn run_scenes(args: &FitHandsArgs, config: &FitConfig) -> Result<()> {
     if args.hands.model_dir.is_some() {
         bail!("--scene fits a synthetic scene's procedural hands: drop --model-dir");
@@ -214,37 +201,26 @@ fn run_scenes(args: &FitHandsArgs, config: &FitConfig) -> Result<()> {
         );
     }
     let device = args.device.device()?.autodiff();
-    let models = bitt_mesh::procedural_pair();
+    let settings = SyntheticFitSettings {
+        noise_px: args.noise_px,
+        drop: args.drop,
+        seed: args.seed,
+        default_intrinsics: args.default_intrinsics,
+    };
     let mut results = Vec::new();
     for dir in &args.scene {
         let scene = SynthScene::read(dir).with_context(|| format!("--scene {}", dir.display()))?;
-        let kp = synthetic_keypoints(&scene, args.noise_px, args.drop, args.seed)?;
-        let truth = scene.train.hands.camera;
-        let camera = if args.default_intrinsics {
-            PinholeCamera {
-                intrinsics: PinholeCamera::default_for_image(truth.width, truth.height)?.intrinsics,
-                ..truth
-            }
-        } else {
-            truth
-        };
-        let fit = fit_keypoints(
-            &models,
-            &kp.keypoints,
-            &camera,
+        let name = dir.display().to_string();
+        let r = fit_synthetic_scene(
+            &scene,
+            name,
+            &settings,
             config,
             &device,
             &mut FitBar::quiet(),
         )
         .with_context(|| format!("fitting --scene {}", dir.display()))?;
-        let scores = score_fit(&fit, &scene, &camera)?;
-        let residual = fit
-            .report
-            .hands
-            .iter()
-            .map(|h| h.mean_residual_px)
-            .sum::<f64>()
-            / fit.report.hands.len().max(1) as f64;
+        let scores = &r.scores;
         println!(
             "{}: 2D joints {:.2} px, root-relative 3D {:.1} mm (max {:.1}), min flexion {:.0} deg ({} bent backwards), {:.1} s",
             dir.display(),
@@ -253,36 +229,11 @@ fn run_scenes(args: &FitHandsArgs, config: &FitConfig) -> Result<()> {
             scores.max_joint_3d_mm,
             scores.min_flexion_deg,
             scores.bent_backwards,
-            fit.report.seconds
+            r.seconds
         );
-        results.push(SceneResult {
-            scene: dir.display().to_string(),
-            scores,
-            residual_px: residual,
-            seconds: fit.report.seconds,
-            dropped: kp.dropped,
-            notes: fit.report.notes,
-            hands: fit.report.hands,
-        });
+        results.push(r);
     }
-    let n = results.len() as f64;
-    let mean = |f: &dyn Fn(&SceneResult) -> f64| results.iter().map(f).sum::<f64>() / n;
-    let summary = serde_json::json!({
-        "scenes": results.len(),
-        "noise_px": args.noise_px,
-        "drop": args.drop,
-        "seed": args.seed,
-        "intrinsics": if args.default_intrinsics { "default" } else { "true" },
-        "mean_joint_2d_px": mean(&|r| r.scores.joint_2d_px),
-        "mean_joint_3d_mm": mean(&|r| r.scores.joint_3d_mm),
-        "max_joint_3d_mm": results.iter().map(|r| r.scores.max_joint_3d_mm).fold(0.0, f64::max),
-        "bent_backwards": results.iter().map(|r| r.scores.bent_backwards).sum::<usize>(),
-        "min_flexion_deg": results.iter().map(|r| r.scores.min_flexion_deg).fold(f64::INFINITY, f64::min),
-        "mean_seconds": mean(&|r| r.seconds),
-        "max_seconds": results.iter().map(|r| r.seconds).fold(0.0, f64::max),
-        "config": config,
-        "per_scene": results,
-    });
+    let summary = fit_eval_summary(&results, &settings, config);
     println!(
         "mean over {} scenes: 2D joints {:.2} px, root-relative 3D {:.1} mm, {} joints bent backwards, {:.1} s per fit ({} intrinsics)",
         results.len(),
@@ -381,15 +332,10 @@ mod tests {
     use super::*;
     use bitt_mesh::glam::DVec3;
     use bitt_mesh::keypoints::TwoHandKeypoints;
-    use bitt_mesh::{HandParams, HandPose, Side};
+    use bitt_mesh::{HandParams, HandPose, PinholeCamera, Side};
     use bitt_tests::real_fixture::{scratch, write_image};
-    use clap::Parser;
 
-    #[derive(Debug, Parser)]
-    struct Cli {
-        #[command(flatten)]
-        args: FitHandsArgs,
-    }
+    type Cli = crate::test_args::Parsed<FitHandsArgs>;
 
     fn args(extra: &[String]) -> FitHandsArgs {
         let mut all = vec!["bitt".to_string()];

@@ -3,9 +3,9 @@
 //! The binary is the only place that picks a burn device and touches the command line;
 //! everything else lives in the library crates (see ARCHITECTURE.md).
 
+mod allocator;
 mod avatar_pose;
 mod backend_check;
-mod bench_render;
 mod demo;
 mod device;
 mod eval;
@@ -19,6 +19,8 @@ mod refine_hands;
 mod render;
 mod render_avatar;
 mod synth;
+#[cfg(test)]
+mod test_args;
 mod texture;
 mod train_scene;
 
@@ -26,13 +28,6 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
-
-/// mimalloc instead of the system allocator: a training step allocates and frees many
-/// multi-megabyte tensor buffers, and glibc's `malloc` serves each from fresh `mmap` pages
-/// (a page fault per 4 KiB touched) and unmaps it on free. mimalloc keeps freed segments for
-/// reuse, as glibc does when told to (measured in the README, Networks).
-#[global_allocator]
-static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 /// BiTT: bi-directional texture reconstruction of interacting two hands from a single image.
 #[derive(Debug, Parser)]
@@ -108,8 +103,6 @@ enum Command {
     /// clip of the scene's novel poses), `--static` glTF or `--format obj`, in the training
     /// pose or another (`--pose`, `--procedural-pose`).
     Export(export::ExportArgs),
-    /// Time the renderer's stages forward and backward (JSON; `cargo xtask bench render`).
-    BenchRender(bench_render::BenchRenderArgs),
     /// Mean and largest absolute difference of two images (JSON; `cargo xtask e2e`).
     #[command(hide = true)]
     ImageDiff {
@@ -145,6 +138,7 @@ fn quiet_vulkan_layers() {
 
 fn main() -> Result<()> {
     quiet_vulkan_layers();
+    allocator::keep_freed_memory();
     let cli = Cli::parse();
     match cli.command {
         Command::PoseHands(args) => pose_hands::run(&args),
@@ -162,7 +156,6 @@ fn main() -> Result<()> {
         Command::FitHands(args) => fit_hands::run(&args),
         Command::Eval(args) => eval::run(&args),
         Command::EvalMerge(args) => eval::merge_cmd(&args),
-        Command::BenchRender(args) => bench_render::run(&args),
         Command::ImageDiff { a, b } => render::image_diff(&a, &b),
         Command::Nets(args) => nets::run(&args),
         Command::Metrics(args) => metrics::run(&args),

@@ -248,13 +248,8 @@ pub fn convert(args: &ConvertLpipsArgs) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use clap::Parser;
 
-    #[derive(Debug, Parser)]
-    struct Cli {
-        #[command(flatten)]
-        args: MetricsArgs,
-    }
+    type Cli = crate::test_args::Parsed<MetricsArgs>;
 
     fn scratch(name: &str) -> PathBuf {
         let d =

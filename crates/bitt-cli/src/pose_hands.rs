@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use bitt_mesh::annotation::{
-    BITT_CROP_SIZE, InterHandFrame, PosedTwoHands, scene_from_interhand_json,
+    InterHandFrame, PosedTwoHands, annotation_image_size, scene_from_interhand_json,
 };
 use bitt_mesh::export::{ExportHand, write_glb, write_obj};
 use bitt_mesh::mano::{load_mano_pkl, save_safetensors};
@@ -12,19 +12,39 @@ use bitt_mesh::{
     HandPair, Side, TwoHandScene, load_bitt_annotation, load_model_dir, procedural_pair,
 };
 
-/// Arguments of `bitt pose-hands`.
-#[derive(Debug, clap::Args)]
-pub struct PoseHandsArgs {
-    /// Folder holding MANO_LEFT / MANO_RIGHT as `.pkl` (as distributed) or `.safetensors`.
+/// The hand models of `bitt pose-hands` and `bitt render`: MANO or the procedural hands.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ModelArgs {
+    /// Folder holding MANO_LEFT / MANO_RIGHT as `.pkl` (as distributed) or `.safetensors`
+    /// (`bitt render` also needs --uvs for them).
     #[arg(
         long,
         conflicts_with = "procedural",
         required_unless_present = "procedural"
     )]
     pub model_dir: Option<PathBuf>,
-    /// Use the project's procedural hand model instead of MANO.
+    /// Use the project's procedural hand model instead of MANO (it has its own UV layout).
     #[arg(long)]
     pub procedural: bool,
+}
+
+impl ModelArgs {
+    /// Loads the hand models these options name.
+    pub fn models(&self) -> Result<HandPair> {
+        match (&self.model_dir, self.procedural) {
+            (Some(dir), false) => Ok(load_model_dir(dir)?),
+            (None, true) => Ok(procedural_pair()),
+            _ => bail!("give exactly one of --model-dir DIR and --procedural"),
+        }
+    }
+}
+
+/// Arguments of `bitt pose-hands`.
+#[derive(Debug, clap::Args)]
+pub struct PoseHandsArgs {
+    /// The hand models.
+    #[command(flatten)]
+    pub hands: ModelArgs,
     /// A BiTT/InterHand annotation pickle (the demo `NN.pkl` layout).
     #[arg(
         long,
@@ -62,7 +82,8 @@ pub struct PoseHandsArgs {
     pub json: bool,
 }
 
-fn parse_size(s: &str) -> Result<(u32, u32), String> {
+/// Parses an image size `WxH` (sides 1 to 4096), as `--image-size` takes it.
+pub(crate) fn parse_size(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s
         .split_once(['x', 'X'])
         .ok_or_else(|| format!("`{s}` is not WxH"))?;
@@ -70,36 +91,17 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
         v.trim()
             .parse::<u32>()
             .ok()
-            .filter(|&n| n > 0)
-            .ok_or_else(|| format!("`{s}` is not WxH"))
+            .filter(|&n| (1..=4096).contains(&n))
+            .ok_or_else(|| format!("`{s}` is not WxH with sides 1 to 4096"))
     };
     Ok((parse(w)?, parse(h)?))
-}
-
-/// The size of the image beside an annotation (`01.pkl` -> `01.jpg`), if one is there.
-fn sibling_image_size(annotation: &Path) -> Option<(u32, u32)> {
-    ["jpg", "jpeg", "png"]
-        .iter()
-        .map(|ext| annotation.with_extension(ext))
-        .find(|p| p.is_file())
-        .and_then(|p| image::image_dimensions(p).ok())
-}
-
-/// Loads the hand models the arguments ask for.
-pub fn models(model_dir: Option<&Path>, procedural: bool) -> Result<HandPair> {
-    match (model_dir, procedural) {
-        (Some(dir), false) => Ok(load_model_dir(dir)?),
-        (None, true) => Ok(procedural_pair()),
-        _ => bail!("give exactly one of --model-dir DIR and --procedural"),
-    }
 }
 
 fn scene(args: &PoseHandsArgs) -> Result<TwoHandScene> {
     if let Some(path) = &args.annotation {
         let size = args
             .image_size
-            .or_else(|| sibling_image_size(path))
-            .unwrap_or((BITT_CROP_SIZE, BITT_CROP_SIZE));
+            .unwrap_or_else(|| annotation_image_size(path));
         return Ok(load_bitt_annotation(path, size)?);
     }
     let (Some(mano_path), Some(cam_path), Some(capture), Some(frame), Some(camera)) = (
@@ -209,7 +211,7 @@ pub fn report_boxes(scene: &TwoHandScene, posed: &PosedTwoHands, json: bool) {
 
 /// `bitt pose-hands`.
 pub fn run(args: &PoseHandsArgs) -> Result<()> {
-    let models = models(args.model_dir.as_deref(), args.procedural)?;
+    let models = args.hands.models()?;
     let scene = scene(args)?;
     let posed = scene.pose_in_camera(&models)?;
     write_hands(&models, &posed, &args.out, args.glb.as_deref())?;

@@ -212,13 +212,8 @@ fn print_notes(notes: &[String]) {
 mod tests {
     use super::*;
     use bitt_tests::real_fixture::{AnnotationOptions, scratch, write_annotation, write_image};
-    use clap::Parser;
 
-    #[derive(Debug, Parser)]
-    struct Cli {
-        #[command(flatten)]
-        args: RefineHandsArgs,
-    }
+    type Cli = crate::test_args::Parsed<RefineHandsArgs>;
 
     fn args(extra: &[&str]) -> RefineHandsArgs {
         let mut all = vec![

@@ -8,14 +8,10 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, anyhow, bail};
-use bitt::outputs::{contact_sheet_on, fill_hidden_texels};
-use bitt_mesh::annotation::BITT_CROP_SIZE;
-use bitt_mesh::glam::{DMat3, DVec3};
-use bitt_mesh::{HandModel, HandPair, OrthographicCamera, PinholeCamera, Side, UvLayout};
-use bitt_render::scene::{
-    Camera, LightValues, RenderSettings, Scene, TexelSurface, TexelVisibilityStats, TexturedMesh,
-    UnwrapSettings, render, unwrap,
-};
+use bitt::figure::{FigureHand, FigureImage, FigureOptions, default_light, render_figure};
+use bitt_mesh::annotation::annotation_image_size;
+use bitt_mesh::{HandModel, HandPair, Side, UvLayout};
+use bitt_render::scene::LightValues;
 use bitt_texture::{SkinIdentity, TextureLayout, generate_texture, load_html_uvs, load_image};
 use burn::tensor::{Device, Tensor, TensorData};
 
@@ -24,16 +20,9 @@ use crate::device::DeviceName;
 /// Arguments of `bitt render`.
 #[derive(Debug, clap::Args)]
 pub struct RenderArgs {
-    /// Folder holding MANO_LEFT / MANO_RIGHT (`.pkl` or `.safetensors`); needs --uvs.
-    #[arg(
-        long,
-        conflicts_with = "procedural",
-        required_unless_present = "procedural"
-    )]
-    pub model_dir: Option<PathBuf>,
-    /// Use the project's procedural hand model (it has its own UV layout).
-    #[arg(long)]
-    pub procedural: bool,
+    /// The hand models.
+    #[command(flatten)]
+    pub hands: crate::pose_hands::ModelArgs,
     /// HTML UV file (`uvs.pkl`, `uvs_right.pkl`) for models without a UV layout (MANO).
     #[arg(long)]
     pub uvs: Option<PathBuf>,
@@ -48,7 +37,7 @@ pub struct RenderArgs {
     pub demo: bool,
     /// Image size `WxH` the annotation's intrinsics refer to. Default: the size of the image
     /// beside the annotation (same name, .jpg/.png), else 256x256 (the BiTT crop).
-    #[arg(long, value_parser = parse_size)]
+    #[arg(long, value_parser = crate::pose_hands::parse_size)]
     pub image_size: Option<(u32, u32)>,
     /// A UV texture PNG/JPEG applied to both hands (row 0 at the top, `v = 0` at the
     /// bottom). Default: a procedural skin texture (see --skin-seed).
@@ -87,32 +76,6 @@ pub struct RenderArgs {
     pub device: DeviceName,
 }
 
-/// The default light of `bitt render`: brighter than the reference's training default
-/// (ambient 0.5, diffuse 0.1), from above and a little right of the camera (camera frame:
-/// x right, y down, z forward).
-pub fn default_light() -> LightValues {
-    LightValues {
-        ambient: [0.45; 3],
-        diffuse: [0.7; 3],
-        specular: [0.2; 3],
-        location: [0.15, -0.35, 0.05],
-    }
-}
-
-fn parse_size(s: &str) -> Result<(u32, u32), String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| format!("`{s}` is not WxH"))?;
-    let parse = |v: &str| {
-        v.trim()
-            .parse::<u32>()
-            .ok()
-            .filter(|&n| (1..=4096).contains(&n))
-            .ok_or_else(|| format!("`{s}` is not WxH with sides 1 to 4096"))
-    };
-    Ok((parse(w)?, parse(h)?))
-}
-
 /// Parses `--light`: inline JSON when it starts with `{`, else a JSON file.
 pub fn parse_light(arg: &str) -> Result<LightValues> {
     // Inline JSON (an object, or anything else that parses as JSON and is not a file's
@@ -149,32 +112,8 @@ pub fn sibling(out: &Path, suffix: &str) -> PathBuf {
     out.with_file_name(format!("{stem}.{suffix}.png"))
 }
 
-fn sibling_image_size(annotation: &Path) -> Option<(u32, u32)> {
-    ["jpg", "jpeg", "png"]
-        .iter()
-        .map(|ext| annotation.with_extension(ext))
-        .find(|p| p.is_file())
-        .and_then(|p| image::image_dimensions(p).ok())
-}
-
-/// A hand ready to render: model, posed camera-frame vertices, UV layout.
-struct Hand {
-    side: Side,
-    model: HandModel,
-    uv: UvLayout,
-    vertices: Vec<DVec3>,
-}
-
-/// An image made in memory, written at the end.
-struct Output {
-    path: PathBuf,
-    data: Vec<f32>,
-    width: usize,
-    height: usize,
-}
-
 fn load_models(args: &RenderArgs) -> Result<(HandPair, [UvLayout; 2])> {
-    let models = crate::pose_hands::models(args.model_dir.as_deref(), args.procedural)?;
+    let models = args.hands.models()?;
     let uv_for = |side: Side, model: &HandModel| -> Result<UvLayout> {
         let file = match side {
             Side::Left => args.uvs_left.as_ref().or(args.uvs.as_ref()),
@@ -213,8 +152,7 @@ fn load_scene(args: &RenderArgs, models: &HandPair) -> Result<bitt_mesh::TwoHand
     };
     let size = args
         .image_size
-        .or_else(|| sibling_image_size(path))
-        .unwrap_or((BITT_CROP_SIZE, BITT_CROP_SIZE));
+        .unwrap_or_else(|| annotation_image_size(path));
     Ok(bitt_mesh::load_bitt_annotation(path, size)?)
 }
 
@@ -233,11 +171,6 @@ fn image_tensor(path: &Path, what: &str, device: &Device) -> Result<(Tensor<3>, 
         Tensor::from_data(TensorData::new(img.data, [3, h, w]), device),
         [h, w],
     ))
-}
-
-fn host<const D: usize>(t: Tensor<D>) -> Result<Vec<f32>> {
-    t.try_into_vec_as::<f32>()
-        .map_err(|e| anyhow!("reading a tensor back from the device: {e:?}"))
 }
 
 /// The default per-hand textures: procedural skin of one person, `[3, S, S]` each.
@@ -266,29 +199,6 @@ fn procedural_textures(
             Ok(Tensor::from_data(TensorData::new(image, [3, s, s]), device))
         })
         .collect()
-}
-
-fn textured_mesh(hand: &Hand) -> Result<TexturedMesh> {
-    let uvs = hand
-        .uv
-        .uvs
-        .iter()
-        .map(|p| [p.x as f32, p.y as f32])
-        .collect();
-    Ok(TexturedMesh::new(
-        hand.model.faces.clone(),
-        hand.model.num_vertices(),
-        hand.uv.faces.clone(),
-        uvs,
-    )?)
-}
-
-fn vertex_tensor(vertices: &[DVec3], device: &Device) -> Tensor<2> {
-    let flat = vertices
-        .iter()
-        .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
-        .collect();
-    Tensor::from_data(TensorData::new(flat, [vertices.len(), 3]), device)
 }
 
 /// `bitt render`.
@@ -342,13 +252,16 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             })?
             .vertices
             .clone();
-        hands.push(Hand {
+        hands.push(FigureHand {
             side,
             model: models.get(side).clone(),
             uv,
             vertices,
         });
     }
+    let hands: [FigureHand; 2] = hands
+        .try_into()
+        .map_err(|_| anyhow!("two hands expected"))?;
     let textures = match &args.texture {
         Some(path) => {
             let (t, _) = image_tensor(path, "--texture", &device)?;
@@ -356,157 +269,47 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         }
         None => procedural_textures(args, &models, &uvs, &device)?,
     };
-    // Vertices are in the camera frame: render with the intrinsics and no extrinsics.
-    let camera = Camera::Pinhole(PinholeCamera {
-        rotation: DMat3::IDENTITY,
-        translation: DVec3::ZERO,
-        ..scene.camera
-    });
-    let unwrap_image = match &args.unwrap {
+    let camera = &scene.camera;
+    let unwrap = match &args.unwrap {
         Some(path) => {
             let (t, [h, w]) = image_tensor(path, "--unwrap", &device)?;
-            if [h, w] != [camera.height(), camera.width()] {
+            if [h, w] != [camera.height as usize, camera.width as usize] {
                 bail!(
                     "--unwrap {}: the image is {w}x{h}, but the camera renders {}x{}; \
                      unwrap an image of the camera's size",
                     path.display(),
-                    camera.width(),
-                    camera.height()
+                    camera.width,
+                    camera.height
                 );
             }
             Some(t)
         }
         None => None,
     };
-    let settings = RenderSettings {
+    let options = FigureOptions {
+        uv_size: args.uv_size,
+        views: args.views,
+        unwrap,
         antialias: !args.no_antialias,
-        ..RenderSettings::default()
     };
-    let meshes: Vec<TexturedMesh> = hands.iter().map(textured_mesh).collect::<Result<_>>()?;
-    let vertex_tensors: Vec<Tensor<2>> = hands
-        .iter()
-        .map(|h| vertex_tensor(&h.vertices, &device))
-        .collect();
-
-    let both = Scene::new(&[&meshes[0], &meshes[1]])?;
-    let light_t = light.to_light(&device);
-    let full = render(
-        &both,
-        &vertex_tensors,
-        &textures,
-        &camera,
-        &light_t,
-        &settings,
-    )?;
-    let mut outputs = Vec::new();
-    if let Some(n) = args.views {
-        let mut panels = render_views(
-            n,
-            &meshes,
-            &vertex_tensors,
-            &hands,
-            &textures,
-            &light,
-            &settings,
-        )?;
-        // Three columns; the unwrap row starts a row of its own.
-        panels.resize(n.div_ceil(3) * 3, vec![0.0; 3 * VIEW_SIZE * VIEW_SIZE]);
-        panels.extend(unwrap_row(&full, &camera, &hands)?);
-        let (data, height, width) = contact_sheet_on(&panels, VIEW_SIZE, VIEW_SIZE, 3, 0.0);
-        outputs.push(Output {
-            path: args.out.clone(),
-            data,
-            width,
-            height,
-        });
-        write_all(&outputs)?;
-        return Ok(());
-    }
-
-    let (w, h) = (camera.width(), camera.height());
-    outputs.push(Output {
-        path: args.out.clone(),
-        data: host(full.image.clone())?,
-        width: w,
-        height: h,
-    });
-    for (i, hand) in hands.iter().enumerate() {
-        let alone = Scene::new(&[&meshes[i]])?;
-        let r = render(
-            &alone,
-            &vertex_tensors[i..=i],
-            &textures[i..=i],
-            &camera,
-            &light_t,
-            &settings,
-        )?;
-        outputs.push(Output {
-            path: sibling(&args.out, hand.side.as_str()),
-            data: host(r.image)?,
-            width: w,
-            height: h,
-        });
-        let mask = host(full.masks[i].clone())?;
-        outputs.push(Output {
-            path: sibling(&args.out, &format!("mask_{}", hand.side.as_str())),
-            data: mask.repeat(3),
-            width: w,
-            height: h,
-        });
-    }
-    let mut stats = None;
-    if let Some(image) = unwrap_image {
-        let mut visible = Vec::new();
-        let s = args.uv_size;
-        for hand in &hands {
-            let layout = TextureLayout::from_uv(&hand.uv, s, s, 0)?;
-            let surface = TexelSurface::new(&layout, &hand.model.faces, hand.model.num_vertices())?;
-            let u = unwrap(
-                image.clone(),
-                &camera,
-                &surface,
-                &hand.vertices,
-                &full.raster,
-                &UnwrapSettings::default(),
-            )?;
-            let name = hand.side.as_str();
-            outputs.push(Output {
-                path: sibling(&args.out, &format!("unwrap_{name}")),
-                data: layout.compact_to_image(&host(u.texels)?, [0.0; 3])?,
-                width: s,
-                height: s,
-            });
-            let mask = host(u.visible)?.repeat(3);
-            outputs.push(Output {
-                path: sibling(&args.out, &format!("visible_{name}")),
-                data: layout.compact_to_image(&mask, [0.0; 3])?,
-                width: s,
-                height: s,
-            });
-            visible.push(u.visible_host);
-        }
-        if visible[0].len() != visible[1].len() {
-            bail!(
-                "the left and right UV layouts have different texels ({} vs {}); \
-                 the statistics need one layout shared by both hands",
-                visible[0].len(),
-                visible[1].len()
-            );
-        }
-        stats = Some(TexelVisibilityStats::from_masks(&visible[0], &visible[1])?);
-    }
-    write_all(&outputs)?;
+    let (images, stats) = render_figure(&hands, &textures, camera, &light, &options)?;
+    write_all(&args.out, &images)?;
     if let Some(stats) = stats {
         println!("{}", serde_json::to_string_pretty(&stats)?);
     }
     Ok(())
 }
 
-fn write_all(outputs: &[Output]) -> Result<()> {
-    for o in outputs {
-        bitt_texture::save_png8(&o.path, &o.data, o.width, o.height)
-            .with_context(|| format!("writing {}", o.path.display()))?;
-        eprintln!("wrote {} ({}x{})", o.path.display(), o.width, o.height);
+/// Writes a figure's images: the main one at `out`, the others next to it ([`sibling`]).
+fn write_all(out: &Path, images: &[FigureImage]) -> Result<()> {
+    for o in images {
+        let path = match &o.suffix {
+            None => out.to_path_buf(),
+            Some(suffix) => sibling(out, suffix),
+        };
+        bitt_texture::save_png8(&path, &o.data, o.width, o.height)
+            .with_context(|| format!("writing {}", path.display()))?;
+        eprintln!("wrote {} ({}x{})", path.display(), o.width, o.height);
     }
     Ok(())
 }
@@ -547,100 +350,11 @@ pub fn image_diff(a: &Path, b: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Side of each view of the `--views` grid.
-const VIEW_SIZE: usize = 256;
-
-/// `n` orthographic views around the hands (rotating about the camera's vertical axis), each
-/// lit from its own camera side, as `[3, VIEW_SIZE, VIEW_SIZE]` panels.
-fn render_views(
-    n: usize,
-    meshes: &[TexturedMesh],
-    vertices: &[Tensor<2>],
-    hands: &[Hand],
-    textures: &[Tensor<3>],
-    light: &LightValues,
-    settings: &RenderSettings,
-) -> Result<Vec<Vec<f32>>> {
-    let device = vertices[0].device();
-    let scene = Scene::new(&[&meshes[0], &meshes[1]])?;
-    let points: Vec<DVec3> = hands.iter().flat_map(|h| h.vertices.clone()).collect();
-    let centre = points.iter().copied().sum::<DVec3>() / points.len() as f64;
-    let mut panels = Vec::with_capacity(n);
-    for k in 0..n {
-        let angle = std::f64::consts::TAU * k as f64 / n as f64;
-        let rotation = DMat3::from_rotation_y(angle);
-        let ortho = OrthographicCamera::framing(
-            &points,
-            rotation,
-            VIEW_SIZE as u32,
-            VIEW_SIZE as u32,
-            0.08,
-        )?;
-        let camera = Camera::Orthographic(ortho);
-        // The light sits towards this view's camera and above it (y is down).
-        let towards = camera.towards_camera(centre);
-        let up = rotation.transpose() * DVec3::NEG_Y;
-        let spot = centre + towards * 0.5 + up * 0.3 + rotation.transpose() * DVec3::X * 0.1;
-        let view_light = LightValues {
-            location: [spot.x as f32, spot.y as f32, spot.z as f32],
-            ..*light
-        };
-        let r = render(
-            &scene,
-            vertices,
-            textures,
-            &camera,
-            &view_light.to_light(&device),
-            settings,
-        )?;
-        panels.push(host(r.image)?);
-    }
-    Ok(panels)
-}
-
-/// The row under a views grid: the scene camera's render, then, per hand, that render
-/// unwrapped onto the hand's UV layout (`VIEW_SIZE` texels a side): visible texels in their
-/// unwrapped colour, hidden texels of the layout dark grey, unused texels black.
-fn unwrap_row(
-    full: &bitt_render::scene::SceneRender,
-    camera: &Camera,
-    hands: &[Hand],
-) -> Result<Vec<Vec<f32>>> {
-    let image = full.image.clone();
-    let [_, h, w] = image.dims();
-    anyhow::ensure!(
-        [h, w] == [VIEW_SIZE, VIEW_SIZE],
-        "--views needs a {VIEW_SIZE}x{VIEW_SIZE} scene camera for its unwrap row (got {w}x{h})"
-    );
-    let mut panels = vec![host(image.clone())?];
-    for hand in hands {
-        let layout = TextureLayout::from_uv(&hand.uv, VIEW_SIZE, VIEW_SIZE, 0)?;
-        let surface = TexelSurface::new(&layout, &hand.model.faces, hand.model.num_vertices())?;
-        let u = unwrap(
-            image.clone(),
-            camera,
-            &surface,
-            &hand.vertices,
-            &full.raster,
-            &UnwrapSettings::default(),
-        )?;
-        let mut texels = host(u.texels)?;
-        fill_hidden_texels(&mut texels, &u.visible_host, 0.25);
-        panels.push(layout.compact_to_image(&texels, [0.0; 3])?);
-    }
-    Ok(panels)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use clap::Parser;
 
-    #[derive(Debug, Parser)]
-    struct Cli {
-        #[command(flatten)]
-        args: RenderArgs,
-    }
+    type Cli = crate::test_args::Parsed<RenderArgs>;
 
     fn args(extra: &[&str]) -> RenderArgs {
         let mut all = vec!["bitt", "--procedural", "--demo", "--uv-size", "64"];

@@ -11,34 +11,24 @@ use std::sync::OnceLock;
 /// Where a run goes without `--out`.
 const DEFAULT_OUT: &str = "runs/train-scene";
 
-/// The keypoint fit's record in a run folder (`--keypoints`).
-const FIT_RECORD: &str = "fit.json";
-
-/// The keypoint fit's overlay in a run folder.
-const FIT_OVERLAY: &str = "fit_overlay.png";
-
 use anyhow::{Context, Result, bail};
 use bitt::assets::HandAssets;
-use bitt::checkpoint::Checkpoint;
-use bitt::fit::{fit_keypoints, fit_photo, keypoint_overlay, score_fit};
+use bitt::fit::{fit_keypoints, fit_photo, record_synthetic_fit};
 use bitt::real::keypoint_setup;
 use bitt::real::{
-    HandSource, PriorSource, RealInput, RealScene, RealScores, annotation_setup, interhand_setup,
-    score_real,
+    HandSource, PriorSource, RealInput, RealScores, annotation_setup, interhand_setup, score_real,
 };
 use bitt::refine::{
     MeshRefine, RefineConfig, RefineObserver, Refinement, pca_pose_notes, refine_synthetic,
 };
-use bitt::run::{
-    files, synthetic_trainer, texture_prior_with_progress, write_run, write_training_refinement,
-};
-use bitt::trainer::previous_checkpoint_path;
+use bitt::run::{files, synthetic_trainer, texture_prior_with_progress, write_run};
+use bitt::run_folder::{FitOutput, RunInput, fresh_out, load_checkpoints, write_fresh_run};
 use bitt::{Observer, Progress, TrainConfig, Trainer};
+use bitt_mesh::PinholeCamera;
 use bitt_mesh::interhand::{
     InterHandDataset, InterHandSelection, PAPER_NOVEL_POSES, PAPER_NOVEL_VIEWS,
 };
 use bitt_mesh::keypoints::{KeypointOptions, read_keypoints};
-use bitt_mesh::{PinholeCamera, TwoHandScene};
 use bitt_nets::Preset;
 use bitt_synth::{SynthConfig, SynthScene};
 
@@ -203,23 +193,8 @@ fn stop_flag() -> Result<Arc<AtomicBool>> {
     }
 }
 
-/// What a run trains on.
-enum Input {
-    /// A synthetic scene (ground truth known).
-    Synthetic(Box<SynthScene>),
-    /// Real data: the record kept in the run folder and the prepared views.
-    Real(Box<RealInput>, Box<RealScene>),
-}
-
-/// A fresh run's trainer and input; nothing is written.
-/// A keypoint fit to record in the run folder: `fit.json` and its overlay.
-struct FitOutput {
-    record: serde_json::Value,
-    overlay: (Vec<f32>, [usize; 2]),
-}
-
 /// What a fresh run starts from.
-type Fresh = (Trainer, Input, Option<Refinement>, Option<FitOutput>);
+type Fresh = (Trainer, RunInput, Option<Refinement>, Option<FitOutput>);
 
 fn fresh(
     args: &TrainSceneArgs,
@@ -300,7 +275,7 @@ fn fresh(
         )?;
         return Ok((
             setup.trainer,
-            Input::Real(Box::new(setup.input), Box::new(setup.scene)),
+            RunInput::Real(Box::new(setup.input), Box::new(setup.scene)),
             setup.refinement,
             Some(FitOutput {
                 record: fit.record(),
@@ -352,7 +327,7 @@ fn fresh(
         }
         return Ok((
             setup.trainer,
-            Input::Real(Box::new(setup.input), Box::new(setup.scene)),
+            RunInput::Real(Box::new(setup.input), Box::new(setup.scene)),
             setup.refinement,
             None,
         ));
@@ -393,7 +368,7 @@ fn fresh(
         )?;
         return Ok((
             setup.trainer,
-            Input::Real(Box::new(setup.input), Box::new(setup.scene)),
+            RunInput::Real(Box::new(setup.input), Box::new(setup.scene)),
             setup.refinement,
             None,
         ));
@@ -439,7 +414,7 @@ fn fresh(
     let trainer = synthetic_trainer(&scene, &config, &pca, device)?;
     Ok((
         trainer,
-        Input::Synthetic(Box::new(scene)),
+        RunInput::Synthetic(Box::new(scene)),
         refinement,
         fit_output,
     ))
@@ -500,35 +475,12 @@ fn fit_synthetic(
             keypoints.display()
         );
     }
-    let scores = score_fit(&fit, scene, &camera)?;
+    let (scores, output) = record_synthetic_fit(&fit, scene, &points, &camera, keypoints)?;
     eprintln!(
         "fitted in {:.1} s: 2D joints {:.2} px, root-relative 3D joints {:.1} mm from the truth",
         fit.report.seconds, scores.joint_2d_px, scores.joint_3d_mm
     );
-    let assets = HandAssets::new(models.clone(), 64)?;
-    let overlay = keypoint_overlay(
-        &scene.train.image,
-        &models,
-        &assets,
-        &points,
-        &TwoHandScene {
-            camera,
-            ..fit.hands.clone()
-        },
-    )?;
-    scene.given = TwoHandScene {
-        camera: scene.given.camera,
-        ..fit.hands.clone()
-    };
-    Ok(FitOutput {
-        record: serde_json::json!({
-            "kind": "keypoint fit (synthetic scene)",
-            "keypoints": keypoints.display().to_string(),
-            "report": fit.report,
-            "scores_vs_truth": scores,
-        }),
-        overlay,
-    })
+    Ok(output)
 }
 
 /// A resumed run's trainer (checkpoint restored) and input.
@@ -536,7 +488,7 @@ fn resumed(
     args: &TrainSceneArgs,
     dir: &Path,
     device: &burn::tensor::Device,
-) -> Result<(Trainer, Input)> {
+) -> Result<(Trainer, RunInput)> {
     let path = dir.join(files::CONFIG);
     let text = std::fs::read_to_string(&path)
         .with_context(|| format!("--resume {}: cannot read {}", dir.display(), path.display()))?;
@@ -556,7 +508,11 @@ fn resumed(
             dir.join(files::SCENE).join("scene.json").display()
         );
     }
-    let (checkpoint, previous) = load_checkpoints(dir)?;
+    let (checkpoint, previous, warnings) = load_checkpoints(dir)
+        .with_context(|| format!("--resume {}: no usable checkpoint", dir.display()))?;
+    for w in warnings {
+        eprintln!("warning: {w}");
+    }
     // Temporaries of writes a killed process never finished (it is a run folder of ours).
     for path in bitt_mesh::export::remove_stale_temporaries(dir)? {
         eprintln!("removed {}, left by an interrupted write", path.display());
@@ -576,13 +532,13 @@ fn resumed(
     let (mut trainer, input) = if real {
         let (input, scene, trainer) = RealInput::resume_trainer(dir, config, cache, device)
             .with_context(|| format!("--resume {}: the run's real input", dir.display()))?;
-        (trainer, Input::Real(Box::new(input), Box::new(scene)))
+        (trainer, RunInput::Real(Box::new(input), Box::new(scene)))
     } else {
         let scene = SynthScene::read(&dir.join(files::SCENE))
             .with_context(|| format!("--resume {}: the run's scene", dir.display()))?;
         let pca = procedural_prior(&config, cache, device)?;
         let trainer = synthetic_trainer(&scene, &config, &pca, device)?;
-        (trainer, Input::Synthetic(Box::new(scene)))
+        (trainer, RunInput::Synthetic(Box::new(scene)))
     };
     trainer.resume_from(&checkpoint, previous)?;
     eprintln!(
@@ -590,39 +546,6 @@ fn resumed(
         checkpoint.iteration, trainer.config.iterations
     );
     Ok((trainer, input))
-}
-
-/// A run's latest checkpoint and the one before it. A latest file that is missing or fails
-/// its checks is reported, and the previous one (kept by the trainer) is resumed instead.
-fn load_checkpoints(dir: &Path) -> Result<(Checkpoint, Option<Checkpoint>)> {
-    let latest_path = dir.join(files::CHECKPOINT);
-    let previous_path = previous_checkpoint_path(&latest_path);
-    let previous = if previous_path.is_file() {
-        match Checkpoint::load(&previous_path) {
-            Ok(c) => Some(c),
-            Err(e) => {
-                eprintln!("warning: ignoring the previous checkpoint: {e}");
-                None
-            }
-        }
-    } else {
-        None
-    };
-    match Checkpoint::load(&latest_path) {
-        Ok(latest) => Ok((latest, previous)),
-        Err(e) => match previous {
-            Some(p) => {
-                eprintln!(
-                    "warning: {e}\nresuming from the previous checkpoint {} (iteration {}) instead",
-                    previous_path.display(),
-                    p.iteration
-                );
-                Ok((p, None))
-            }
-            None => Err(anyhow::Error::new(e)
-                .context(format!("--resume {}: no usable checkpoint", dir.display()))),
-        },
-    }
 }
 
 /// The configuration of `--config FILE` (a full `TrainConfig`), else the named preset.
@@ -657,163 +580,8 @@ pub struct HandsArgs {
 impl HandsArgs {
     /// The sources these options name.
     pub fn sources(&self) -> (HandSource, PriorSource) {
-        sources(self.model_dir.as_deref(), self.html_dir.as_deref())
+        bitt::real::sources(self.model_dir.as_deref(), self.html_dir.as_deref())
     }
-}
-
-/// Hand models and texture prior of `--model-dir` / `--html-dir` (procedural without them).
-pub(crate) fn sources(
-    model_dir: Option<&Path>,
-    html_dir: Option<&Path>,
-) -> (HandSource, PriorSource) {
-    let hands = match model_dir {
-        Some(dir) => HandSource::Mano {
-            dir: dir.to_path_buf(),
-        },
-        None => HandSource::Procedural,
-    };
-    let prior = match html_dir {
-        Some(dir) => PriorSource::Html {
-            dir: dir.to_path_buf(),
-        },
-        None => PriorSource::Procedural,
-    };
-    (hands, prior)
-}
-
-/// Names a run writes at the top of its folder.
-const RUN_NAMES: [&str; 20] = [
-    files::CONFIG,
-    files::CHECKPOINT,
-    files::CHECKPOINT_PREVIOUS,
-    files::TIMING,
-    files::METRICS,
-    files::LIGHT,
-    files::REPORT,
-    files::AVATAR,
-    files::LOSS_PLOT,
-    files::SCENE,
-    files::REFINE,
-    files::REFINE_OVERLAY,
-    FIT_RECORD,
-    FIT_OVERLAY,
-    files::REAL_SCORES,
-    "input.json",
-    "input",
-    "textures",
-    "renders",
-    "turntable",
-];
-
-/// What an output folder holds.
-#[derive(Debug, PartialEq)]
-enum OutFolder {
-    /// Missing or empty: a new run may go there.
-    Free,
-    /// A run of ours (a checkpoint).
-    Run,
-    /// An earlier run of ours that stopped before its first checkpoint (its configuration
-    /// and input, nothing else): a new run may replace it.
-    Unfinished,
-    /// Anything else: not ours.
-    Foreign,
-}
-
-fn out_folder(dir: &Path) -> Result<OutFolder> {
-    if dir.is_symlink() && !dir.exists() {
-        bail!(
-            "{}: is a symbolic link to nothing; choose another --out",
-            dir.display()
-        );
-    }
-    if !dir.exists() {
-        return Ok(OutFolder::Free);
-    }
-    if !dir.is_dir() {
-        bail!("{}: exists and is not a folder", dir.display());
-    }
-    if dir.join(files::CHECKPOINT).exists() || dir.join(files::CHECKPOINT_PREVIOUS).exists() {
-        return Ok(OutFolder::Run);
-    }
-    let names: Vec<String> = std::fs::read_dir(dir)
-        .with_context(|| format!("reading {}", dir.display()))?
-        .filter_map(|e| e.ok())
-        .map(|e| e.file_name().to_string_lossy().into_owned())
-        .collect();
-    if names.is_empty() {
-        return Ok(OutFolder::Free);
-    }
-    let ours = names
-        .iter()
-        .all(|n| RUN_NAMES.contains(&n.as_str()) || n.starts_with(".checkpoint"));
-    let started = dir.join(files::CONFIG).is_file()
-        && (dir.join(files::SCENE).join("scene.json").is_file()
-            || dir.join("input.json").is_file());
-    Ok(if ours && started {
-        OutFolder::Unfinished
-    } else {
-        OutFolder::Foreign
-    })
-}
-
-/// The folder of a new run. `--out` given explicitly must not hold a run (resume it
-/// instead), nor be a non-empty folder that is not a run of ours (unless `force`, and even
-/// then no file of a name the run writes may be in it); the default folder moves on to
-/// `runs/train-scene-2`, `-3`, ... past earlier runs and foreign folders, so rerunning the
-/// demo never touches anything.
-fn fresh_out(out: &Path, default: &Path, force: bool) -> Result<PathBuf> {
-    let state = out_folder(out)?;
-    match state {
-        OutFolder::Free | OutFolder::Unfinished => return Ok(out.to_path_buf()),
-        OutFolder::Foreign if force && out != default => {
-            let clash: Vec<&str> = RUN_NAMES
-                .iter()
-                .copied()
-                .filter(|n| out.join(n).exists())
-                .collect();
-            if !clash.is_empty() {
-                bail!(
-                    "{}: --force never overwrites files it did not write, and the folder holds {}                      (names a run writes); choose another --out",
-                    out.display(),
-                    clash.join(", ")
-                );
-            }
-            return Ok(out.to_path_buf());
-        }
-        _ if out == default => {}
-        OutFolder::Run => bail!(
-            "{} already holds a run; use --resume {} to continue it or choose another --out",
-            out.display(),
-            out.display()
-        ),
-        OutFolder::Foreign => bail!(
-            "{}: the folder exists, is not empty and holds no run of bitt (no {}); choose \
-             another --out, or add --force to write the run into it (it never overwrites a \
-             file of the user's)",
-            out.display(),
-            files::CHECKPOINT
-        ),
-    }
-    let mut next = None;
-    for n in 2.. {
-        let dir = PathBuf::from(format!("{}-{n}", default.display()));
-        if matches!(out_folder(&dir)?, OutFolder::Free | OutFolder::Unfinished) {
-            next = Some(dir);
-            break;
-        }
-    }
-    let next = next.expect("an unused folder name");
-    println!(
-        "{} holds {}; this run goes to {}",
-        default.display(),
-        if state == OutFolder::Run {
-            "an earlier run"
-        } else {
-            "files that are not a run"
-        },
-        next.display()
-    );
-    Ok(next)
 }
 
 /// Refuses path arguments that are not valid UTF-8 before anything is read or written: a
@@ -860,7 +628,10 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
             (dir.clone(), trainer, input)
         }
         None => {
-            let out = fresh_out(&args.out, Path::new(DEFAULT_OUT), args.force)?;
+            let (out, note) = fresh_out(&args.out, Path::new(DEFAULT_OUT), args.force)?;
+            if let Some(note) = note {
+                println!("{note}");
+            }
             let mut config = training_config(args.config.as_deref(), args.preset)?;
             if let Some(n) = args.iterations {
                 config.iterations = n;
@@ -872,26 +643,8 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
             // Every input is read and checked (and the trainer built) before the run folder
             // is created, so a bad input leaves nothing behind.
             let (trainer, input, refinement, fit) = fresh(args, config, &device)?;
-            std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-            bitt_mesh::export::write_atomically(
-                &out.join(files::CONFIG),
-                serde_json::to_string_pretty(&trainer.config)?.as_bytes(),
-            )?;
-            match &input {
-                Input::Synthetic(scene) => scene.write(&out.join(files::SCENE))?,
-                Input::Real(record, scene) => record.write(&out, scene)?,
-            }
-            if let Some(f) = &fit {
-                bitt::outputs::write_json(&out.join(FIT_RECORD), &f.record)?;
-                let [h, w] = f.overlay.1;
-                bitt::outputs::write_png(&out.join(FIT_OVERLAY), &f.overlay.0, h, w)?;
-            }
+            write_fresh_run(&out, &trainer, &input, fit.as_ref(), refinement.as_ref())?;
             if let Some(r) = &refinement {
-                let truth = match &input {
-                    Input::Synthetic(scene) => Some(&scene.train.hands),
-                    Input::Real(..) => None,
-                };
-                write_training_refinement(&out, &trainer, r, truth)?;
                 for n in &r.report.notes {
                     eprintln!("note: {n}");
                 }
@@ -940,17 +693,10 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
         r => r?,
     }
     eprintln!("writing results");
-    let synthetic = match &input {
-        Input::Synthetic(scene) => Some(scene.as_ref()),
-        Input::Real(..) => None,
-    };
-    let clip = match &input {
-        Input::Synthetic(scene) => bitt::run::novel_pose_clip(scene),
-        Input::Real(_, scene) => scene.novel_poses.iter().map(|p| p.hands.clone()).collect(),
-    };
-    let summary = write_run(&out, &trainer, synthetic, args.turntable, &clip)?;
+    let clip = input.novel_pose_clip();
+    let summary = write_run(&out, &trainer, input.synthetic(), args.turntable, &clip)?;
     let real_scores = match &input {
-        Input::Real(_, scene)
+        RunInput::Real(_, scene)
             if !(scene.novel_views.is_empty() && scene.novel_poses.is_empty()) =>
         {
             let scores = score_real(&trainer, scene)?;
@@ -1045,25 +791,12 @@ fn print_summary(out: &Path, s: &bitt::run::RunSummary, real: Option<&RealScores
 mod tests {
     use super::*;
     use bitt_tests::real_fixture::{AnnotationOptions, scratch, write_annotation, write_image};
-    use clap::Parser;
 
-    #[derive(Debug, Parser)]
-    struct Cli {
-        #[command(flatten)]
-        args: TrainSceneArgs,
-    }
+    type Cli = crate::test_args::Parsed<TrainSceneArgs>;
 
-    #[derive(Debug, Parser)]
-    struct AvatarCli {
-        #[command(flatten)]
-        args: crate::render_avatar::RenderAvatarArgs,
-    }
+    type AvatarCli = crate::test_args::Parsed<crate::render_avatar::RenderAvatarArgs>;
 
-    #[derive(Debug, Parser)]
-    struct ExportCli {
-        #[command(flatten)]
-        args: crate::export::ExportArgs,
-    }
+    type ExportCli = crate::test_args::Parsed<crate::export::ExportArgs>;
 
     fn args(extra: &[&str]) -> TrainSceneArgs {
         let mut all = vec!["bitt", "--preset", "tiny", "--turntable", "2"];
@@ -1077,71 +810,6 @@ mod tests {
 
     /// `--config FILE` replaces the preset (the run's `config.json` is that file's content);
     /// it conflicts with `--preset`, and a broken file is named and leaves nothing behind.
-    /// Rerunning with the default folder moves on to a numbered one; an explicit folder that
-    /// holds a run is refused.
-    #[test]
-    fn new_runs_never_overwrite_earlier_ones() {
-        let dir = scratch("cli-fresh-out");
-        let default = dir.join("runs/train-scene");
-        let finished = |d: &Path| {
-            std::fs::create_dir_all(d).unwrap();
-            std::fs::write(d.join(files::CHECKPOINT), b"x").unwrap();
-        };
-        assert_eq!(fresh_out(&default, &default, false).unwrap(), default);
-        finished(&default);
-        let second = fresh_out(&default, &default, false).unwrap();
-        assert_eq!(second, dir.join("runs/train-scene-2"));
-        finished(&second);
-        assert_eq!(
-            fresh_out(&default, &default, false).unwrap(),
-            dir.join("runs/train-scene-3")
-        );
-        let err = fresh_out(&second, &default, false).unwrap_err().to_string();
-        assert!(err.contains("already holds a run"), "{err}");
-        assert_eq!(
-            fresh_out(&dir.join("other"), &default, false).unwrap(),
-            dir.join("other")
-        );
-        // A folder of the user's is refused; --force writes into it only when nothing in it
-        // has a name the run writes, and the default folder moves on past it.
-        let mine = dir.join("mine");
-        std::fs::create_dir_all(&mine).unwrap();
-        std::fs::write(mine.join("notes.txt"), "mine").unwrap();
-        let err = fresh_out(&mine, &default, false).unwrap_err().to_string();
-        assert!(
-            err.contains("holds no run") && err.contains("--force"),
-            "{err}"
-        );
-        assert_eq!(fresh_out(&mine, &default, true).unwrap(), mine);
-        std::fs::write(mine.join(files::CONFIG), "{\"mine\": 1}").unwrap();
-        let err = fresh_out(&mine, &default, true).unwrap_err().to_string();
-        assert!(
-            err.contains("never overwrites") && err.contains("config.json"),
-            "{err}"
-        );
-        let own_default = dir.join("fresh-default");
-        std::fs::create_dir_all(&own_default).unwrap();
-        std::fs::write(own_default.join(files::CONFIG), "{}").unwrap();
-        assert_eq!(
-            fresh_out(&own_default, &own_default, false).unwrap(),
-            dir.join("fresh-default-2")
-        );
-        // An unfinished run of ours (configuration and input, no checkpoint) is replaced.
-        let unfinished = dir.join("unfinished");
-        std::fs::create_dir_all(unfinished.join(files::SCENE)).unwrap();
-        std::fs::write(unfinished.join(files::CONFIG), "{}").unwrap();
-        std::fs::write(unfinished.join(files::SCENE).join("scene.json"), "{}").unwrap();
-        assert_eq!(fresh_out(&unfinished, &default, false).unwrap(), unfinished);
-        // A dangling symbolic link is named as such.
-        #[cfg(unix)]
-        {
-            let link = dir.join("dangling");
-            std::os::unix::fs::symlink(dir.join("nowhere"), &link).unwrap();
-            let err = fresh_out(&link, &default, false).unwrap_err().to_string();
-            assert!(err.contains("symbolic link to nothing"), "{err}");
-        }
-    }
-
     #[test]
     fn config_file_replaces_the_preset() {
         let dir = scratch("cli-config");
@@ -1289,7 +957,7 @@ mod tests {
         let last = bytes.len() - 3;
         bytes[last] ^= 0x40;
         std::fs::write(&ckpt, &bytes).unwrap();
-        let (c, p) = load_checkpoints(&out).unwrap();
+        let (c, p, _) = load_checkpoints(&out).unwrap();
         assert!(
             p.is_none() && c.iteration < 3,
             "resumed from {}",

@@ -6,6 +6,7 @@ use std::path::Path;
 use bitt_pickle::Value;
 use glam::{DMat3, DVec3};
 
+use crate::FileErrorExt;
 use crate::MeshError;
 use crate::camera::{PinholeCamera, PixelBox};
 use crate::lbs::{HandParams, HandPose, PosedHand, rodrigues};
@@ -98,6 +99,17 @@ impl TwoHandScene {
             left: pose(Side::Left)?,
             right: pose(Side::Right)?,
         })
+    }
+
+    /// Every camera-frame vertex of the hands present ([`Self::pose_in_camera`]), left then
+    /// right.
+    pub fn camera_vertices(&self, models: &HandPair) -> Result<Vec<glam::DVec3>, MeshError> {
+        let posed = self.pose_in_camera(models)?;
+        Ok([posed.left, posed.right]
+            .into_iter()
+            .flatten()
+            .flat_map(|h| h.vertices)
+            .collect())
     }
 
     /// Mean and largest distance (pixels of this scene's camera) between the projections of
@@ -254,14 +266,7 @@ pub fn scene_from_bitt_annotation(
         "camera.camera",
         path,
     )?);
-    let camera = PinholeCamera::new(
-        intrinsics,
-        rotation,
-        translation,
-        image_size.0,
-        image_size.1,
-    )
-    .map_err(|e| MeshError::format(path, e.to_string()))?;
+    let camera = file_camera(path, intrinsics, rotation, translation, image_size)?;
     let frame = match root.get("image") {
         Some(img) => FrameInfo {
             file_name: img
@@ -284,6 +289,36 @@ pub fn scene_from_bitt_annotation(
         camera,
         frame,
     })
+}
+
+/// The pinhole camera a file describes, checked; an invalid one is a format error of `path`.
+fn file_camera(
+    path: &Path,
+    intrinsics: DMat3,
+    rotation: DMat3,
+    translation: DVec3,
+    image_size: (u32, u32),
+) -> Result<PinholeCamera, MeshError> {
+    PinholeCamera::new(
+        intrinsics,
+        rotation,
+        translation,
+        image_size.0,
+        image_size.1,
+    )
+    .map_err(|e| MeshError::format(path, e.to_string()))
+}
+
+/// The image size an annotation pickle's intrinsics refer to when none is given: the size of
+/// the image beside it (same name, `.jpg` / `.jpeg` / `.png`: `01.pkl` -> `01.jpg`), else
+/// [`BITT_CROP_SIZE`] square (the reference's crop).
+pub fn annotation_image_size(path: &Path) -> (u32, u32) {
+    ["jpg", "jpeg", "png"]
+        .iter()
+        .map(|ext| path.with_extension(ext))
+        .find(|p| p.is_file())
+        .and_then(|p| image::image_dimensions(p).ok())
+        .unwrap_or((BITT_CROP_SIZE, BITT_CROP_SIZE))
 }
 
 /// Reads a two-hand annotation: a BiTT/InterHand annotation pickle, or a `hands.json` as
@@ -415,7 +450,7 @@ pub fn hands_json(scene: &TwoHandScene, models: &HandPair) -> Result<String, Mes
 /// Reads `hands.json` bytes (see [`hands_json`]); `path` names the file in errors.
 ///
 /// # Errors
-/// [`MeshError::Format`] for malformed JSON, a wrong `format`, wrong lengths, NaN, no hand,
+/// [`crate::FileError::Format`] for malformed JSON, a wrong `format`, wrong lengths, NaN, no hand,
 /// or an invalid rotation or camera.
 pub fn scene_from_hands_json(bytes: &[u8], path: &Path) -> Result<TwoHandScene, MeshError> {
     let file: HandsJson = serde_json::from_slice(bytes)
@@ -603,14 +638,7 @@ pub fn scene_from_interhand_json(
     let intrinsics = mat3_rows(&[
         focal[0], 0.0, princpt[0], 0.0, focal[1], princpt[1], 0.0, 0.0, 1.0,
     ]);
-    let camera = PinholeCamera::new(
-        intrinsics,
-        rotation,
-        translation,
-        image_size.0,
-        image_size.1,
-    )
-    .map_err(|e| MeshError::format(camera_path, e.to_string()))?;
+    let camera = file_camera(camera_path, intrinsics, rotation, translation, image_size)?;
     Ok(TwoHandScene {
         left,
         right,

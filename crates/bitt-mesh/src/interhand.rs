@@ -49,6 +49,7 @@ use std::path::{Path, PathBuf};
 
 use serde::de::{DeserializeSeed, IgnoredAny, MapAccess, Visitor};
 
+use crate::FileErrorExt;
 use crate::MeshError;
 use crate::annotation::{InterHandFrame, TwoHandScene, scene_from_interhand_json};
 

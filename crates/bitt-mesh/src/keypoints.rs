@@ -23,6 +23,7 @@ use std::str::FromStr;
 
 use serde_json::{Map, Value};
 
+use crate::FileErrorExt;
 use crate::{MeshError, PinholeCamera, Side};
 
 /// Number of keypoints per hand (wrist + 5 digits x 4).
@@ -289,7 +290,7 @@ pub fn guess_format(value: &Value) -> Option<KeypointFormat> {
 
 /// Reads keypoints from the bytes of a file; `path` only names the file in errors.
 ///
-/// Errors are [`MeshError::Format`] naming `path` and the offending field, e.g.
+/// Errors are [`crate::FileError::Format`] naming `path` and the offending field, e.g.
 /// `people[0].hand_left_keypoints_2d: 60 numbers, expected 63 (...)` or
 /// `right[3][1]: not a finite number (found null)`. Never panics.
 pub fn parse_keypoints(
@@ -300,7 +301,7 @@ pub fn parse_keypoints(
     parse(bytes, options).map_err(|detail| MeshError::format(path, detail))
 }
 
-/// Reads a keypoint file (see [`parse_keypoints`]); [`MeshError::Io`] naming the file when it
+/// Reads a keypoint file (see [`parse_keypoints`]); [`crate::FileError::Io`] naming the file when it
 /// cannot be read.
 pub fn read_keypoints(
     path: &Path,
@@ -1106,7 +1107,10 @@ mod tests {
             Ok(k) => panic!("expected an error, got {k:?}"),
             Err(e) => e,
         };
-        assert!(matches!(e, MeshError::Format { .. }), "{e:?}");
+        assert!(
+            matches!(e, MeshError::File(crate::FileError::Format { .. })),
+            "{e:?}"
+        );
         let message = e.to_string();
         assert!(
             message.starts_with(&format!("{}: ", path().display())),
@@ -1608,7 +1612,7 @@ mod tests {
 
         let missing = Path::new("/nonexistent/dir/keypoints.json");
         let e = read_keypoints(missing, &options(None)).unwrap_err();
-        assert!(matches!(e, MeshError::Io { .. }));
+        assert!(matches!(e, MeshError::File(crate::FileError::Io { .. })));
         assert!(
             e.to_string().contains("/nonexistent/dir/keypoints.json"),
             "{e}"

@@ -23,6 +23,7 @@ pub mod lbs;
 pub mod mano;
 pub mod model;
 pub mod procedural;
+pub mod st;
 
 /// The `glam` crate this crate's types ([`UvLayout`], [`HandModel`], ...) are built on, so
 /// that crates above can name `glam::DVec2` / `glam::DVec3` without depending on it directly.
@@ -30,7 +31,7 @@ pub use glam;
 
 pub use annotation::{TwoHandScene, load_bitt_annotation};
 pub use camera::{OrthographicCamera, PinholeCamera};
-pub use error::MeshError;
+pub use error::{FileError, FileErrorExt, MeshError};
 pub use lbs::{HandParams, HandPose, PosedHand};
 pub use mano::{HandPair, load_model_dir};
 pub use model::{HandModel, Side, UvLayout};

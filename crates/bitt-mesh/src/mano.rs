@@ -10,12 +10,14 @@ use std::path::{Path, PathBuf};
 
 use bitt_pickle::{NdArray, Value};
 use glam::{DVec2, DVec3};
-use safetensors::{Dtype, SafeTensors};
+use safetensors::Dtype;
 
+use crate::FileErrorExt;
 use crate::MeshError;
 use crate::model::{
     HandModel, MANO_FINGERTIPS, NUM_BETAS, NUM_JOINTS, NUM_POSE, NUM_POSE_FEATURES, Side, UvLayout,
 };
+use crate::st::{self, Entry, f64_bytes, u32_bytes};
 
 /// Value of `kintree_table[0, 0]` in MANO files: the root's "no parent" marker (`u32::MAX`).
 const MANO_ROOT_PARENT: i64 = 4_294_967_295;
@@ -317,19 +319,11 @@ fn file_name(p: &Path) -> String {
 /// Format tag written into the metadata of this project's model files.
 pub const SAFETENSORS_FORMAT: &str = "bitt-hand-model/1";
 
-fn f64_bytes(values: impl IntoIterator<Item = f64>) -> Vec<u8> {
-    values.into_iter().flat_map(f64::to_le_bytes).collect()
-}
-
-fn u32_bytes(values: impl IntoIterator<Item = u32>) -> Vec<u8> {
-    values.into_iter().flat_map(u32::to_le_bytes).collect()
-}
-
 /// Serializes a hand model to safetensors bytes (f64 arrays, u32 indices, i64 parents).
 pub fn to_safetensors(model: &HandModel) -> Result<Vec<u8>, MeshError> {
     let nv = model.num_vertices();
     let nf = model.faces.len();
-    let mut tensors: Vec<(String, Dtype, Vec<usize>, Vec<u8>)> = vec![
+    let mut tensors: Vec<Entry> = vec![
         (
             "v_template".into(),
             Dtype::F64,
@@ -409,21 +403,12 @@ pub fn to_safetensors(model: &HandModel) -> Result<Vec<u8>, MeshError> {
             u32_bytes(uv.faces.iter().flatten().copied()),
         ));
     }
-    let mut views = Vec::with_capacity(tensors.len());
-    for (name, dtype, shape, bytes) in &tensors {
-        let view =
-            safetensors::tensor::TensorView::new(*dtype, shape.clone(), bytes).map_err(|e| {
-                MeshError::format(&model.source, format!("cannot encode `{name}`: {e}"))
-            })?;
-        views.push((name.clone(), view));
-    }
     let metadata = HashMap::from([
         ("format".to_string(), SAFETENSORS_FORMAT.to_string()),
         ("side".to_string(), model.side.as_str().to_string()),
         ("source".to_string(), model.source.clone()),
     ]);
-    safetensors::serialize(views, Some(metadata))
-        .map_err(|e| MeshError::format(&model.source, format!("cannot encode: {e}")))
+    Ok(st::serialize(Path::new(&model.source), &tensors, metadata)?)
 }
 
 /// Writes a hand model as safetensors, atomically (a temporary file renamed into place).
@@ -440,79 +425,48 @@ pub fn load_safetensors(path: &Path) -> Result<HandModel, MeshError> {
 
 /// Parses safetensors bytes written by [`to_safetensors`]; `path` names them in errors.
 pub fn from_safetensors(bytes: &[u8], path: &Path) -> Result<HandModel, MeshError> {
-    let err = |d: String| MeshError::format(path, d);
-    let st =
-        SafeTensors::deserialize(bytes).map_err(|e| err(format!("not a safetensors file: {e}")))?;
-    let (_, meta) = SafeTensors::read_metadata(bytes)
-        .map_err(|e| err(format!("bad safetensors header: {e}")))?;
-    let meta = meta.metadata().clone().unwrap_or_default();
+    let r = st::Reader::open(bytes, path)?;
+    let meta = r.metadata();
     if meta.get("format").map(String::as_str) != Some(SAFETENSORS_FORMAT) {
-        return Err(err(format!(
-            "is not a bitt hand model (metadata format {:?}, expected {SAFETENSORS_FORMAT:?})",
-            meta.get("format")
-        )));
+        return Err(r
+            .err(format!(
+                "is not a bitt hand model (metadata format {:?}, expected {SAFETENSORS_FORMAT:?})",
+                meta.get("format")
+            ))
+            .into());
     }
     let side = match meta.get("side").map(String::as_str) {
         Some("left") => Side::Left,
         Some("right") => Side::Right,
         other => {
-            return Err(err(format!(
-                "metadata `side` is {other:?}, expected \"left\" or \"right\""
-            )));
+            return Err(r
+                .err(format!(
+                    "metadata `side` is {other:?}, expected \"left\" or \"right\""
+                ))
+                .into());
         }
     };
-    let tensor = |name: &str, dtype: Dtype| -> Result<(Vec<usize>, Vec<u8>), MeshError> {
-        let t = st
-            .tensor(name)
-            .map_err(|_| err(format!("missing tensor `{name}`")))?;
-        if t.dtype() != dtype {
-            return Err(err(format!(
-                "tensor `{name}` is {:?}, expected {dtype:?}",
-                t.dtype()
-            )));
-        }
-        Ok((t.shape().to_vec(), t.data().to_vec()))
-    };
-    let f64s = |name: &str, shape: &[Option<usize>]| -> Result<(Vec<usize>, Vec<f64>), MeshError> {
-        let (s, b) = tensor(name, Dtype::F64)?;
-        check_shape(name, &s, shape).map_err(err)?;
-        Ok((
-            s,
-            b.chunks_exact(8)
-                .map(|c| f64::from_le_bytes(c.try_into().unwrap_or([0; 8])))
-                .collect(),
-        ))
-    };
-    let u32s = |name: &str, shape: &[Option<usize>]| -> Result<(Vec<usize>, Vec<u32>), MeshError> {
-        let (s, b) = tensor(name, Dtype::U32)?;
-        check_shape(name, &s, shape).map_err(err)?;
-        Ok((
-            s,
-            b.chunks_exact(4)
-                .map(|c| u32::from_le_bytes(c.try_into().unwrap_or([0; 4])))
-                .collect(),
-        ))
-    };
-    let (vs, v) = f64s("v_template", &[None, Some(3)])?;
+    let (vs, v) = r.values::<f64>("v_template", &[None, Some(3)])?;
     let nv = vs[0];
-    let (_, faces) = u32s("faces", &[None, Some(3)])?;
-    let (_, joint_regressor) = f64s("joint_regressor", &[Some(NUM_JOINTS), Some(nv)])?;
-    let (_, skinning_weights) = f64s("skinning_weights", &[Some(nv), Some(NUM_JOINTS)])?;
-    let (ps, pb) = tensor("parents", Dtype::I64)?;
-    check_shape("parents", &ps, &[Some(NUM_JOINTS)]).map_err(err)?;
-    let parents = pb
-        .chunks_exact(8)
-        .map(|c| i64::from_le_bytes(c.try_into().unwrap_or([0; 8])))
+    let (_, faces) = r.values::<u32>("faces", &[None, Some(3)])?;
+    let (_, joint_regressor) = r.values::<f64>("joint_regressor", &[Some(NUM_JOINTS), Some(nv)])?;
+    let (_, skinning_weights) =
+        r.values::<f64>("skinning_weights", &[Some(nv), Some(NUM_JOINTS)])?;
+    let (_, parents) = r.values::<i64>("parents", &[Some(NUM_JOINTS)])?;
+    let parents = parents
+        .into_iter()
         .map(|p| usize::try_from(p).ok())
         .collect();
-    let (_, shape_dirs) = f64s("shape_dirs", &[Some(nv), Some(3), Some(NUM_BETAS)])?;
-    let (_, pose_dirs) = f64s("pose_dirs", &[Some(nv), Some(3), Some(NUM_POSE_FEATURES)])?;
-    let (_, pose_pca_components) = f64s("pose_pca_components", &[Some(NUM_POSE), Some(NUM_POSE)])?;
-    let (_, pose_pca_mean) = f64s("pose_pca_mean", &[Some(NUM_POSE)])?;
-    let (_, tips) = u32s("fingertips", &[Some(5)])?;
-    let uv = if st.names().contains(&"uv_coords") {
-        let (_, uvs) = f64s("uv_coords", &[None, Some(2)])?;
-        let (_, uv_faces) = u32s("uv_faces", &[None, Some(3)])?;
+    let (_, shape_dirs) = r.values::<f64>("shape_dirs", &[Some(nv), Some(3), Some(NUM_BETAS)])?;
+    let (_, pose_dirs) =
+        r.values::<f64>("pose_dirs", &[Some(nv), Some(3), Some(NUM_POSE_FEATURES)])?;
+    let (_, pose_pca_components) =
+        r.values::<f64>("pose_pca_components", &[Some(NUM_POSE), Some(NUM_POSE)])?;
+    let (_, pose_pca_mean) = r.values::<f64>("pose_pca_mean", &[Some(NUM_POSE)])?;
+    let (_, tips) = r.values::<u32>("fingertips", &[Some(5)])?;
+    let uv = if r.has("uv_coords") {
+        let (_, uvs) = r.values::<f64>("uv_coords", &[None, Some(2)])?;
+        let (_, uv_faces) = r.values::<u32>("uv_faces", &[None, Some(3)])?;
         Some(UvLayout {
             uvs: uvs
                 .chunks_exact(2)
@@ -546,23 +500,6 @@ pub fn from_safetensors(bytes: &[u8], path: &Path) -> Result<HandModel, MeshErro
     };
     model.validate()?;
     Ok(model)
-}
-
-fn check_shape(name: &str, got: &[usize], want: &[Option<usize>]) -> Result<(), String> {
-    let ok =
-        got.len() == want.len() && got.iter().zip(want).all(|(g, w)| w.is_none_or(|w| w == *g));
-    if ok {
-        Ok(())
-    } else {
-        let want: Vec<String> = want
-            .iter()
-            .map(|w| w.map_or("N".to_string(), |w| w.to_string()))
-            .collect();
-        Err(format!(
-            "tensor `{name}` has shape {got:?}, expected [{}]",
-            want.join(", ")
-        ))
-    }
 }
 
 #[cfg(test)]

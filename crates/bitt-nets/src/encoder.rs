@@ -16,7 +16,7 @@ use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::tensor::{Device, Tensor};
 
 use crate::NetsError;
-use crate::conv_block::{Activation, conv_norm_act};
+use crate::conv_block::{Activation, compose, conv_norm_act};
 
 /// Configuration of a [`ConvEncoder`].
 #[derive(Config, Debug)]
@@ -102,12 +102,32 @@ impl ConvEncoder {
     /// - `image`: `[B, C_in, S, S]` with `S` the configured `image_size`
     /// - output: `[B, C_out]`
     pub fn forward(&self, image: Tensor<4>) -> Tensor<2> {
+        self.forward_with(image, |conv, act, x| conv_norm_act(conv, None, act, x))
+    }
+
+    /// [`ConvEncoder::forward`] composed from burn's layers (`relu(conv(x))`, then the 1x1
+    /// convolution and tanh), without the fused operation: the same function, for tests
+    /// and the `bench_encoders` example.
+    ///
+    /// # Shapes
+    /// - `image`: `[B, C_in, S, S]`
+    /// - output: `[B, C_out]`
+    pub fn forward_burn_layers(&self, image: Tensor<4>) -> Tensor<2> {
+        self.forward_with(image, |conv, act, x| compose(conv, None, act, x))
+    }
+
+    /// The layers with `block(conv, activation, x)` evaluating each convolution.
+    fn forward_with(
+        &self,
+        image: Tensor<4>,
+        block: impl Fn(&Conv2d, Activation, Tensor<4>) -> Tensor<4>,
+    ) -> Tensor<2> {
         let b = image.dims()[0];
         let mut x = image;
         for layer in &self.layers {
-            x = conv_norm_act(layer, None, Activation::Relu, x);
+            x = block(layer, Activation::Relu, x);
         }
-        let x = conv_norm_act(&self.out, None, Activation::Identity, x);
+        let x = block(&self.out, Activation::Identity, x);
         let c = x.dims()[1];
         x.reshape([b, c]).tanh()
     }
@@ -126,18 +146,6 @@ mod tests {
         assert!(ConvEncoderConfig::new(1, 2, 2).validate().is_err());
     }
 
-    /// The encoder as burn layers (`relu(conv(x))`, then the 1x1 convolution and tanh).
-    fn reference_forward(e: &ConvEncoder, image: Tensor<4>) -> Tensor<2> {
-        let b = image.dims()[0];
-        let mut x = image;
-        for layer in &e.layers {
-            x = burn::tensor::activation::relu(layer.forward(x));
-        }
-        let x = e.out.forward(x);
-        let c = x.dims()[1];
-        x.reshape([b, c]).tanh()
-    }
-
     /// With the custom operation on flex: the values, the input's and every parameter's
     /// gradient of burn's layers; on ndarray and wgpu the same values through burn's layers.
     #[test]
@@ -148,7 +156,7 @@ mod tests {
         let e = ConvEncoderConfig::new(7, 32, 4).init(&device);
         let image = random([3, 3, 32, 32], 31, &device).require_grad();
         let y = e.forward(image.clone());
-        let r = reference_forward(&e, image.clone());
+        let r = e.forward_burn_layers(image.clone());
         assert_close(
             &to_vec(y.clone()),
             &to_vec(r.clone()),

@@ -6,7 +6,10 @@
 //! * [`ops`] — the primitives as burn tensor functions on any device ([`rasterize`],
 //!   [`interpolate`], [`texture`], [`antialias`]): the discrete decisions (coverage,
 //!   texel footprints, silhouette pairs) come from the core, the differentiable quantities
-//!   are tensor expressions whose autodiff is the analytic gradient (see [`ops`]);
+//!   are tensor expressions whose autodiff is the analytic gradient (see [`ops`]), and
+//!   [`rasterize_dense`], the rasterizer as a backend operation with nvdiffrast's dense
+//!   per-pixel outputs left on the device (a CubeCL kernel on wgpu/CUDA, the core on all
+//!   cores elsewhere; the same face ids as [`cpu::rasterize`]);
 //! * [`scene`] — cameras to clip space, Phong shading with a point light as the reference's
 //!   PyTorch3D setup computes it, several textured meshes in one depth test (the two
 //!   hands), image-to-UV unwrapping with visible masks, and the paper's texel visibility
@@ -39,6 +42,7 @@
 
 mod backward;
 mod clip;
+mod cube;
 mod error;
 mod interpolate;
 pub mod ops;
@@ -48,8 +52,8 @@ mod texture;
 
 pub use error::{MAX_IMAGE_SIDE, RenderError};
 pub use ops::{
-    AntialiasPlan, Raster, SilhouettePairs, TexturePlan, Topology, antialias, interpolate,
-    rasterize, silhouette_pairs, texture,
+    AntialiasPlan, DenseRaster, Raster, RasterKernel, SilhouettePairs, TexturePlan, Topology,
+    antialias, host_readbacks, interpolate, rasterize, rasterize_dense, silhouette_pairs, texture,
 };
 pub use raster::Fragments;
 
@@ -59,7 +63,7 @@ pub use raster::Fragments;
 pub mod cpu {
     pub use crate::backward::rasterize_backward;
     pub use crate::interpolate::{interpolate, interpolate_backward};
-    pub use crate::raster::{Fragments, rasterize};
+    pub use crate::raster::{Fragments, rasterize, rasterize_parallel};
     pub use crate::texture::{coverage_mask, texture, texture_backward};
 }
 

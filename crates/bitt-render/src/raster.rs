@@ -148,25 +148,51 @@ pub(crate) fn for_each_fragment(
     height: usize,
     mut emit: impl FnMut(usize, [f64; 3], f64),
 ) {
-    let tri = face.map(|i| clip[i as usize].map(f64::from));
-    let poly = clip_triangle(tri);
-    let verts = poly.vertices();
-    for k in 1..verts.len().saturating_sub(1) {
-        let sub = [verts[0], verts[k], verts[k + 1]].map(|v| ScreenVertex::new(v, width, height));
-        raster_triangle(sub, width, height, &mut emit);
+    for tri in face_triangles(clip, face, width, height) {
+        raster_rows(&tri, width, tri.row0, tri.row1, &mut emit);
     }
 }
 
-/// Rasterizes one (already clipped) triangle.
-fn raster_triangle(
+/// A clipped, snapped, positively oriented triangle with its pixel-centre bounds inside the
+/// image (`col0..=col1`, `row0..=row1`, non-empty).
+#[derive(Debug, Clone, Copy)]
+struct Triangle {
     v: [ScreenVertex; 3],
+    /// Per edge `k` (opposite vertex `k`): does the top-left rule draw centres on it?
+    top_left: [bool; 3],
+    col0: i64,
+    col1: i64,
+    row0: i64,
+    row1: i64,
+}
+
+/// Edge `k` is opposite vertex `k`.
+const EDGES: [(usize, usize); 3] = [(1, 2), (2, 0), (0, 1)];
+
+/// The triangles one face rasterizes as: clipped against `w > 0` and the near plane, fanned
+/// from the clipped polygon's first vertex, in fan order; degenerate triangles and those with
+/// no pixel centre inside the image are left out.
+fn face_triangles(
+    clip: &[[f32; 4]],
+    face: [u32; 3],
     width: usize,
     height: usize,
-    emit: &mut impl FnMut(usize, [f64; 3], f64),
-) {
+) -> impl Iterator<Item = Triangle> {
+    let tri = face.map(|i| clip[i as usize].map(f64::from));
+    let poly = clip_triangle(tri);
+    let verts: Vec<_> = poly.vertices().to_vec();
+    (1..verts.len().saturating_sub(1)).filter_map(move |k| {
+        let sub = [verts[0], verts[k], verts[k + 1]].map(|v| ScreenVertex::new(v, width, height));
+        setup_triangle(sub, width, height)
+    })
+}
+
+/// Orients a screen triangle positively and finds its pixel-centre bounds; `None` when it is
+/// degenerate after snapping or covers no pixel centre of the image.
+fn setup_triangle(v: [ScreenVertex; 3], width: usize, height: usize) -> Option<Triangle> {
     let area = edge_fixed(&v[0], &v[1], v[2].fx, v[2].fy);
     if area == 0 {
-        return; // degenerate (after snapping): no pixels
+        return None; // degenerate (after snapping): no pixels
     }
     // Orient positively so that all edge functions are positive inside.
     let v = if area > 0 { v } else { [v[0], v[2], v[1]] };
@@ -178,31 +204,107 @@ fn raster_triangle(
     let col1 = last_centre(max_x).min(width as i64 - 1);
     let row0 = first_centre(min_y).max(0);
     let row1 = last_centre(max_y).min(height as i64 - 1);
-    // Edge k is opposite vertex k.
-    let edges = [(1, 2), (2, 0), (0, 1)];
-    let top_left = edges.map(|(a, b)| is_top_left(&v[a], &v[b]));
-    for row in row0..=row1 {
+    (col0 <= col1 && row0 <= row1).then(|| Triangle {
+        v,
+        top_left: EDGES.map(|(a, b)| is_top_left(&v[a], &v[b])),
+        col0,
+        col1,
+        row0,
+        row1,
+    })
+}
+
+/// Rasterizes rows `row0..=row1` of one triangle (clamped to its bounds).
+fn raster_rows(
+    t: &Triangle,
+    width: usize,
+    row0: i64,
+    row1: i64,
+    emit: &mut impl FnMut(usize, [f64; 3], f64),
+) {
+    let v = &t.v;
+    for row in row0.max(t.row0)..=row1.min(t.row1) {
         let py = row * ONE + HALF;
-        for col in col0..=col1 {
+        for col in t.col0..=t.col1 {
             let px = col * ONE + HALF;
-            let e = edges.map(|(a, b)| edge_fixed(&v[a], &v[b], px, py));
-            let inside = (0..3).all(|k| e[k] > 0 || (e[k] == 0 && top_left[k]));
+            let e = EDGES.map(|(a, b)| edge_fixed(&v[a], &v[b], px, py));
+            let inside = (0..3).all(|k| e[k] > 0 || (e[k] == 0 && t.top_left[k]));
             if !inside {
                 continue;
             }
             let (fx, fy) = (col as f64 + 0.5, row as f64 + 0.5);
-            let mut s = edges.map(|(a, b)| edge_float(&v[a], &v[b], fx, fy));
+            let mut s = EDGES.map(|(a, b)| edge_float(&v[a], &v[b], fx, fy));
             let mut total = s[0] + s[1] + s[2];
             if !(total > 0.0 && total.is_finite()) {
                 // Sliver below float precision: fall back to the exact snapped values.
                 s = e.map(|x| x as f64);
                 total = s[0] + s[1] + s[2];
             }
-            if let Some((bary, depth)) = perspective(&v, s.map(|x| x / total)) {
+            if let Some((bary, depth)) = perspective(v, s.map(|x| x / total)) {
                 emit((row as usize) * width + col as usize, bary, depth);
             }
         }
     }
+}
+
+/// [`rasterize`] on all cores: the image is cut into bands of rows, each band runs the same
+/// per-pixel depth test over every face (in ascending order) that reaches it, so the result
+/// is bit-identical to [`rasterize`] for any thread count.
+///
+/// # Errors
+/// As [`rasterize`].
+pub fn rasterize_parallel(
+    clip: &[[f32; 4]],
+    faces: &[[u32; 3]],
+    width: usize,
+    height: usize,
+) -> Result<Fragments, RenderError> {
+    use rayon::prelude::*;
+    check_image(width, height)?;
+    check_positions(clip)?;
+    check_faces(faces, clip.len())?;
+    // Triangle setup once per face, in face order (fan order within a face).
+    let triangles: Vec<(i32, Triangle)> = faces
+        .par_iter()
+        .enumerate()
+        .map(|(f, &face)| {
+            face_triangles(clip, face, width, height)
+                .map(|t| (f as i32, t))
+                .collect::<Vec<_>>()
+        })
+        .collect::<Vec<_>>()
+        .into_iter()
+        .flatten()
+        .collect();
+    let mut out = Fragments::empty(width, height);
+    let band_rows = height.div_ceil(4 * rayon::current_num_threads()).max(1);
+    let band_len = band_rows * width;
+    out.face
+        .par_chunks_mut(band_len)
+        .zip(out.bary.par_chunks_mut(band_len))
+        .zip(out.depth.par_chunks_mut(band_len))
+        .enumerate()
+        .for_each(|(band, ((face_out, bary_out), depth_out))| {
+            let row0 = (band * band_rows) as i64;
+            let row1 = row0 + (face_out.len() / width) as i64 - 1;
+            let start = band * band_len;
+            for (f, t) in &triangles {
+                if t.row1 < row0 || t.row0 > row1 {
+                    continue;
+                }
+                raster_rows(t, width, row0, row1, &mut |pixel, bary, depth| {
+                    let depth = depth as f32;
+                    let p = pixel - start;
+                    // As in `rasterize`: strict `<`, faces in ascending order.
+                    if depth < depth_out[p] {
+                        depth_out[p] = depth;
+                        face_out[p] = *f;
+                        bary_out[p] = bary.map(|b| b as f32);
+                    }
+                });
+            }
+        });
+    Ok(out)
 }
 
 /// Screen-space barycentrics of a clipped triangle -> perspective-correct barycentrics of the

@@ -19,11 +19,12 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use bitt_mesh::TwoHandScene;
 use bitt_mesh::export::write_atomically;
+use bitt_mesh::st::{self, f32_bytes};
+use bitt_mesh::{FileErrorExt, TwoHandScene};
 use bitt_render::scene::LightValues;
 use burn::tensor::Device;
-use safetensors::{Dtype, SafeTensors};
+use safetensors::Dtype;
 
 use crate::{
     Degradation, Identity, PoseFamily, StudioLight, SynthConfig, SynthError, SynthScene, SynthView,
@@ -128,10 +129,6 @@ fn view_file(v: &SynthView) -> Result<ViewFile, SynthError> {
     })
 }
 
-fn f32_bytes(values: &[f32]) -> Vec<u8> {
-    values.iter().flat_map(|v| v.to_le_bytes()).collect()
-}
-
 /// Writes `scene` into `dir` (see the module docs).
 pub(crate) fn write(scene: &SynthScene, dir: &Path) -> Result<(), SynthError> {
     std::fs::create_dir_all(dir).map_err(|e| SynthError::io(dir, e))?;
@@ -166,7 +163,7 @@ pub(crate) fn write(scene: &SynthScene, dir: &Path) -> Result<(), SynthError> {
 
     // Exact data.
     let data_path = dir.join("data.safetensors");
-    let mut entries: Vec<(String, Vec<usize>, Vec<u8>)> = Vec::new();
+    let mut entries: Vec<st::Entry> = Vec::new();
     for v in scene.views() {
         if v.image.len() != 3 * size * size || v.masks.iter().any(|m| m.len() != size * size) {
             return Err(SynthError::Generate(format!(
@@ -176,6 +173,7 @@ pub(crate) fn write(scene: &SynthScene, dir: &Path) -> Result<(), SynthError> {
         }
         entries.push((
             format!("{}/image", v.name),
+            Dtype::F32,
             vec![3, size, size],
             f32_bytes(&v.image),
         ));
@@ -183,6 +181,7 @@ pub(crate) fn write(scene: &SynthScene, dir: &Path) -> Result<(), SynthError> {
         masks.extend_from_slice(&v.masks[1]);
         entries.push((
             format!("{}/masks", v.name),
+            Dtype::F32,
             vec![2, size, size],
             f32_bytes(&masks),
         ));
@@ -193,7 +192,12 @@ pub(crate) fn write(scene: &SynthScene, dir: &Path) -> Result<(), SynthError> {
                 "the two textures have different lengths".into(),
             ));
         }
-        entries.push((name.to_string(), vec![3, t], f32_bytes(&scene.textures[k])));
+        entries.push((
+            name.to_string(),
+            Dtype::F32,
+            vec![3, t],
+            f32_bytes(&scene.textures[k]),
+        ));
     }
     // The exact copy of scene.json: every float as its bit pattern (serde_json's parser may be
     // off by an ulp; these strings are not parsed as numbers).
@@ -201,17 +205,9 @@ pub(crate) fn write(scene: &SynthScene, dir: &Path) -> Result<(), SynthError> {
         .map(|v| serde_json::to_vec(&floats_to_bits(v)))
         .and_then(|r| r)
         .map_err(|e| SynthError::format(&data_path, format!("cannot encode the scene: {e}")))?;
-    entries.push((EXACT.to_string(), vec![exact.len()], exact));
-    let mut views = Vec::with_capacity(entries.len());
-    for (name, shape, bytes) in &entries {
-        let dtype = if name == EXACT { Dtype::U8 } else { Dtype::F32 };
-        let view = safetensors::tensor::TensorView::new(dtype, shape.clone(), bytes)
-            .map_err(|e| SynthError::format(&data_path, format!("cannot encode {name}: {e}")))?;
-        views.push((name.clone(), view));
-    }
+    entries.push((EXACT.to_string(), Dtype::U8, vec![exact.len()], exact));
     let meta = HashMap::from([("format".to_string(), FORMAT.to_string())]);
-    let bytes = safetensors::serialize(views, Some(meta))
-        .map_err(|e| SynthError::format(&data_path, format!("cannot encode: {e}")))?;
+    let bytes = st::serialize(&data_path, &entries, meta)?;
 
     // Pictures.
     let models = bitt_mesh::procedural_pair();
@@ -278,31 +274,13 @@ pub(crate) fn read(dir: &Path) -> Result<SynthScene, SynthError> {
     let seed = file.seed;
     let data_path = dir.join("data.safetensors");
     let bytes = read_bytes(&data_path)?;
-    let st = SafeTensors::deserialize(&bytes)
-        .map_err(|e| SynthError::format(&data_path, format!("not a safetensors file: {e}")))?;
+    let r = st::Reader::open(&bytes, &data_path)?;
     let tensor = |name: &str, shape: &[usize]| -> Result<Vec<f32>, SynthError> {
-        let t = st
-            .tensor(name)
-            .map_err(|_| SynthError::format(&data_path, format!("no tensor `{name}`")))?;
-        if t.dtype() != Dtype::F32 || t.shape() != shape {
-            return Err(SynthError::format(
-                &data_path,
-                format!(
-                    "`{name}` is {:?} {:?}, expected F32 {shape:?}",
-                    t.dtype(),
-                    t.shape()
-                ),
-            ));
-        }
-        Ok(t.data()
-            .chunks_exact(4)
-            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-            .collect())
+        let want: Vec<Option<usize>> = shape.iter().copied().map(Some).collect();
+        Ok(r.values::<f32>(name, &want)?.1)
     };
-    let exact = st
-        .tensor(EXACT)
-        .map_err(|_| SynthError::format(&data_path, format!("no tensor `{EXACT}`")))?;
-    let file: SceneFile = serde_json::from_slice::<serde_json::Value>(exact.data())
+    let exact = r.bytes(EXACT)?;
+    let file: SceneFile = serde_json::from_slice::<serde_json::Value>(exact)
         .map_err(|e| e.to_string())
         .and_then(bits_to_floats)
         .and_then(|v| serde_json::from_value(v).map_err(|e| e.to_string()))

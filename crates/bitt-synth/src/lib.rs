@@ -55,7 +55,9 @@ pub use degrade::Degradation;
 pub use error::SynthError;
 pub use io::{GENERATOR_VERSION, cached_scene, scene_cache_dir};
 pub use pose::PoseFamily;
-pub use render::{HandRenderer, RenderedView, camera_frame_camera};
+pub use render::{
+    HandRenderer, RenderedView, camera_frame_camera, textured_mesh, textured_mesh_with,
+};
 pub use sheet::{PANEL, contact_sheet};
 pub use stats::{TexelStats, scene_stats};
 pub use texture::{AppearancePatch, PatchKind, SkinDetail, TEXTURE_GUTTER, texture_layouts};
@@ -79,8 +81,8 @@ impl Default for MeshNoise {
     /// An image-aligned single-image estimate (as IntagHand's, which the paper uses): 0.025
     /// rad per finger joint component, 0.15 per beta, 1 px of translation. On the first four
     /// benchmark scenes at 128 px this moves the projected vertices by 1.7-2.0 px on average
-    /// (3.5-4 px at the paper's 256 px; largest 4-9 px at 128): see the ignored test
-    /// `mesh_noise_scale`. The earlier default (0.08, 0.5, 3 px: 5-6 px mean at 128) cost
+    /// (3.5-4 px at the paper's 256 px; largest 4-9 px at 128): see the example
+    /// `mesh_noise_calibration` (`cargo xtask mesh-noise-calibration`). The earlier default (0.08, 0.5, 3 px: 5-6 px mean at 128) cost
     /// every method about 10 dB, far more than the 1-1.5 dB of the paper's Table 1b.
     fn default() -> Self {
         MeshNoise {

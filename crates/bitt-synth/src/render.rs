@@ -8,7 +8,7 @@
 //! the **camera frame**. The image is then clamped to `[0, 1]`.
 
 use bitt_mesh::glam::{DMat3, DVec3};
-use bitt_mesh::{HandPair, PinholeCamera, Side, TwoHandScene};
+use bitt_mesh::{HandModel, HandPair, PinholeCamera, Side, TwoHandScene, UvLayout};
 use bitt_render::scene::{
     Camera, LightValues, RenderSettings, Scene, SceneRender, TexturedMesh, render,
 };
@@ -21,6 +21,35 @@ use crate::SynthError;
 pub(crate) fn host<const D: usize>(t: Tensor<D>) -> Result<Vec<f32>, SynthError> {
     t.try_into_vec_as::<f32>()
         .map_err(|e| SynthError::Generate(format!("reading a tensor back from the device: {e:?}")))
+}
+
+/// The render mesh of a hand model: its faces and vertex count, with the texture
+/// coordinates of its UV layout. The one way a [`HandModel`] becomes a [`TexturedMesh`]
+/// (the synthetic scenes, the trainer's `HandAssets`, `bitt render`'s figures).
+///
+/// # Errors
+/// A model without a UV layout, or a UV layout that does not fit its faces.
+pub fn textured_mesh(model: &HandModel) -> Result<TexturedMesh, SynthError> {
+    let side = model.side;
+    let uv = model
+        .uv
+        .as_ref()
+        .ok_or_else(|| SynthError::Generate(format!("the {side} hand model has no UV layout")))?;
+    textured_mesh_with(model, uv)
+}
+
+/// [`textured_mesh`] with another UV layout than the model's own (HTML's for MANO).
+///
+/// # Errors
+/// A UV layout that does not fit the model's faces.
+pub fn textured_mesh_with(model: &HandModel, uv: &UvLayout) -> Result<TexturedMesh, SynthError> {
+    let uvs = uv.uvs.iter().map(|p| [p.x as f32, p.y as f32]).collect();
+    Ok(TexturedMesh::new(
+        model.faces.clone(),
+        model.num_vertices(),
+        uv.faces.clone(),
+        uvs,
+    )?)
 }
 
 /// One rendered view.
@@ -61,17 +90,7 @@ impl HandRenderer {
         let mut meshes = Vec::new();
         let mut images = Vec::new();
         for (k, side) in Side::BOTH.into_iter().enumerate() {
-            let model = models.get(side);
-            let uv = model.uv.as_ref().ok_or_else(|| {
-                SynthError::Generate(format!("the {side} hand model has no UV layout"))
-            })?;
-            let uvs = uv.uvs.iter().map(|p| [p.x as f32, p.y as f32]).collect();
-            meshes.push(TexturedMesh::new(
-                model.faces.clone(),
-                model.num_vertices(),
-                uv.faces.clone(),
-                uvs,
-            )?);
+            meshes.push(textured_mesh(models.get(side))?);
             let layout = &layouts[k];
             let image = layout.compact_to_image(&textures[k], [0.0; 3])?;
             images.push(Tensor::from_data(

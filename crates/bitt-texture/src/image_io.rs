@@ -10,6 +10,7 @@ use std::collections::HashMap;
 use std::io::Cursor;
 use std::path::Path;
 
+use bitt_mesh::FileErrorExt;
 use image::{ImageBuffer, ImageFormat, Rgb};
 use safetensors::Dtype;
 
@@ -206,7 +207,7 @@ pub fn save_compact_texture(
             format!("{:016x}", layout.fingerprint()),
         ),
     ]);
-    st::write(path, &entries, meta)
+    Ok(st::write(path, &entries, meta)?)
 }
 
 /// Reads a compact texture written by [`save_compact_texture`] for `layout` (`[3T]`,
@@ -222,16 +223,18 @@ pub fn load_compact_texture(path: &Path, layout: &TextureLayout) -> Result<Vec<f
     if (width, height, t) != (layout.width, layout.height, layout.num_texels())
         || fp != format!("{:016x}", layout.fingerprint())
     {
-        return Err(r.err(format!(
-            "texture is for a {width}x{height} layout with {t} texels (fingerprint {fp}), not \
+        return Err(r
+            .err(format!(
+                "texture is for a {width}x{height} layout with {t} texels (fingerprint {fp}), not \
              this {}x{} layout with {} texels (fingerprint {:016x})",
-            layout.width,
-            layout.height,
-            layout.num_texels(),
-            layout.fingerprint()
-        )));
+                layout.width,
+                layout.height,
+                layout.num_texels(),
+                layout.fingerprint()
+            ))
+            .into());
     }
-    let (_, v) = r.f32s("texture", &[Some(3), Some(t)])?;
+    let (_, v) = r.values::<f32>("texture", &[Some(3), Some(t)])?;
     Ok(v)
 }
 
@@ -352,10 +355,16 @@ mod tests {
         let junk = dir.join("junk.png");
         std::fs::write(&junk, b"\x89PNG\r\n\x1a\nnot really").unwrap();
         let e = load_image(&junk).unwrap_err();
-        assert!(matches!(e, TextureError::Format { .. }), "{e}");
+        assert!(
+            matches!(e, TextureError::File(bitt_mesh::FileError::Format { .. })),
+            "{e}"
+        );
         assert!(e.to_string().contains("junk.png"));
         let e = load_image(&dir.join("absent.png")).unwrap_err();
-        assert!(matches!(e, TextureError::Io { .. }) && e.to_string().contains("absent.png"));
+        assert!(
+            matches!(e, TextureError::File(bitt_mesh::FileError::Io { .. }))
+                && e.to_string().contains("absent.png")
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -14,7 +14,7 @@ pub mod layout;
 pub mod pca;
 pub mod procedural;
 pub mod resample;
-mod st;
+use bitt_mesh::st;
 
 pub use error::TextureError;
 pub use html::{

@@ -12,8 +12,8 @@ use std::collections::HashMap;
 use std::path::Path;
 use std::sync::Mutex;
 
-use bitt_mesh::UvLayout;
 use bitt_mesh::glam::DVec2;
+use bitt_mesh::{FileErrorExt, UvLayout};
 use burn::tensor::{Device, Tensor, TensorData};
 use rayon::prelude::*;
 use safetensors::Dtype;
@@ -625,7 +625,7 @@ impl TexturePca {
     /// HTML's 250 MB `f32` basis about 500 MB on top of the model).
     pub fn save_safetensors(&self, path: &Path) -> Result<(), TextureError> {
         let (entries, meta) = self.entries();
-        st::write(path, &entries, meta)
+        Ok(st::write(path, &entries, meta)?)
     }
 
     /// Loads a model written by [`Self::save_safetensors`].
@@ -641,9 +641,9 @@ impl TexturePca {
         let scale: f32 = r.meta("scale")?;
         let layout = read_layout(&r)?;
         let t = layout.num_texels();
-        let (_, mean) = r.f32s("mean", &[Some(3 * t)])?;
-        let (bs, basis) = r.f32s("basis", &[Some(3 * t), None])?;
-        Self::new(layout, mean, basis, bs[1], scale).map_err(|e| r.err(e.to_string()))
+        let (_, mean) = r.values::<f32>("mean", &[Some(3 * t)])?;
+        let (bs, basis) = r.values::<f32>("basis", &[Some(3 * t), None])?;
+        Self::new(layout, mean, basis, bs[1], scale).map_err(|e| r.err(e.to_string()).into())
     }
 }
 
@@ -695,21 +695,23 @@ pub(crate) fn layout_entries(l: &TextureLayout) -> Vec<st::Entry> {
 pub(crate) fn read_layout(r: &st::Reader<'_>) -> Result<TextureLayout, TextureError> {
     let width: usize = r.meta("width")?;
     let height: usize = r.meta("height")?;
-    let (_, tx) = r.u32s("texels", &[None, Some(2)])?;
+    let (_, tx) = r.values::<u32>("texels", &[None, Some(2)])?;
     let texels: Vec<(u32, u32)> = tx.chunks_exact(2).map(|c| (c[0], c[1])).collect();
     let t = texels.len();
     let uv = if r.has("uv_coords") || r.has("uv_faces") {
-        let (_, uvs) = r.f64s("uv_coords", &[None, Some(2)])?;
-        let (_, faces) = r.u32s("uv_faces", &[None, Some(3)])?;
+        let (_, uvs) = r.values::<f64>("uv_coords", &[None, Some(2)])?;
+        let (_, faces) = r.values::<u32>("uv_faces", &[None, Some(3)])?;
         let uvs: Vec<DVec2> = uvs
             .chunks_exact(2)
             .map(|c| DVec2::new(c[0], c[1]))
             .collect();
         if let Some(i) = faces.iter().find(|&&i| i as usize >= uvs.len()) {
-            return Err(r.err(format!(
-                "uv_faces uses UV vertex {i}, but there are {}",
-                uvs.len()
-            )));
+            return Err(r
+                .err(format!(
+                    "uv_faces uses UV vertex {i}, but there are {}",
+                    uvs.len()
+                ))
+                .into());
         }
         Some(UvLayout {
             uvs,
@@ -719,8 +721,8 @@ pub(crate) fn read_layout(r: &st::Reader<'_>) -> Result<TextureLayout, TextureEr
         None
     };
     let layout = if r.has("texel_faces") || r.has("texel_barycentrics") {
-        let (_, f) = r.u32s("texel_faces", &[Some(t)])?;
-        let (_, b) = r.f32s("texel_barycentrics", &[Some(t), Some(3)])?;
+        let (_, f) = r.values::<u32>("texel_faces", &[Some(t)])?;
+        let (_, b) = r.values::<f32>("texel_barycentrics", &[Some(t), Some(3)])?;
         let tf = f
             .into_iter()
             .zip(b.chunks_exact(3))
@@ -730,7 +732,7 @@ pub(crate) fn read_layout(r: &st::Reader<'_>) -> Result<TextureLayout, TextureEr
     } else {
         TextureLayout::from_texels(width, height, texels, uv)
     };
-    layout.map_err(|e| r.err(e.to_string()))
+    layout.map_err(|e| r.err(e.to_string()).into())
 }
 
 impl TexturePcaTensors {
@@ -1516,7 +1518,10 @@ mod tests {
         assert!(TexturePca::load_safetensors(&garbage).is_err());
         let missing = dir.join("missing.safetensors");
         let msg = TexturePca::load_safetensors(&missing).unwrap_err();
-        assert!(matches!(msg, TextureError::Io { .. }), "{msg}");
+        assert!(
+            matches!(msg, TextureError::File(bitt_mesh::FileError::Io { .. })),
+            "{msg}"
+        );
         // A file of the right format without `basis`.
         let m = model(2, 1.0, 12);
         let (entries, meta) = m.entries();

@@ -42,16 +42,10 @@ impl HandAssets {
         let mut surfaces = Vec::new();
         for side in [Side::Left, Side::Right] {
             let model = models.get(side);
+            meshes.push(bitt_synth::textured_mesh(model)?);
             let uv = model.uv.as_ref().ok_or_else(|| {
                 BittError::Invalid(format!("the {side} hand model has no UV layout"))
             })?;
-            let uvs = uv.uvs.iter().map(|p| [p.x as f32, p.y as f32]).collect();
-            meshes.push(TexturedMesh::new(
-                model.faces.clone(),
-                model.num_vertices(),
-                uv.faces.clone(),
-                uvs,
-            )?);
             let layout = TextureLayout::from_uv(uv, texture_size, texture_size, TEXTURE_GUTTER)?;
             surfaces.push(TexelSurface::new(
                 &layout,

@@ -12,7 +12,8 @@
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
-use safetensors::{Dtype, SafeTensors};
+use bitt_mesh::st;
+use safetensors::Dtype;
 
 use crate::BittError;
 use crate::losses::LossTerms;
@@ -84,7 +85,7 @@ fn metadata_checksum(meta: &HashMap<String, String>) -> String {
 impl Checkpoint {
     /// Writes the checkpoint to `path` atomically.
     pub fn save(&self, path: &Path) -> Result<(), BittError> {
-        let mut entries: Vec<(String, Dtype, Vec<usize>, Vec<u8>)> = Vec::new();
+        let mut entries: Vec<st::Entry> = Vec::new();
         for (i, (shape, values)) in self.parameters.iter().enumerate() {
             entries.push((
                 format!("param.{i}"),
@@ -144,16 +145,7 @@ impl Checkpoint {
             ),
         ]);
         metadata.insert("metadata_checksum".into(), metadata_checksum(&metadata));
-        let mut views = Vec::with_capacity(entries.len());
-        for (name, dtype, shape, bytes) in &entries {
-            let view = safetensors::tensor::TensorView::new(*dtype, shape.clone(), bytes)
-                .map_err(|e| BittError::corrupt(path, format!("cannot encode {name}: {e}")))?;
-            views.push((name.clone(), view));
-        }
-        let bytes = safetensors::serialize(views, Some(metadata))
-            .map_err(|e| BittError::corrupt(path, format!("cannot encode: {e}")))?;
-        bitt_mesh::export::write_atomically(path, &bytes)?;
-        Ok(())
+        Ok(st::write(path, &entries, metadata)?)
     }
 
     /// Reads a checkpoint written by [`Checkpoint::save`], verifying its checksums and counts.
@@ -165,11 +157,8 @@ impl Checkpoint {
     /// [`Checkpoint::load`] of a file's bytes; `path` names it in errors.
     pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<Self, BittError> {
         let bad = |m: String| BittError::corrupt(path, m);
-        let st = SafeTensors::deserialize(bytes)
-            .map_err(|e| bad(format!("not a safetensors file: {e}")))?;
-        let (_, meta) = SafeTensors::read_metadata(bytes)
-            .map_err(|e| bad(format!("bad safetensors header: {e}")))?;
-        let meta = meta.metadata().clone().unwrap_or_default();
+        let r = st::Reader::open(bytes, path)?;
+        let meta = r.metadata();
         let get = |k: &str| {
             meta.get(k)
                 .cloned()
@@ -195,7 +184,7 @@ impl Checkpoint {
         }
         if !legacy {
             let stored = get("metadata_checksum")?;
-            let actual = metadata_checksum(&meta);
+            let actual = metadata_checksum(meta);
             if stored != actual {
                 return Err(bad(format!(
                     "the metadata was altered: its checksum is {actual}, the file says {stored}"
@@ -203,7 +192,7 @@ impl Checkpoint {
             }
             let checksums: BTreeMap<String, String> = parse(&get("checksums")?, "checksums", path)?;
             let tensors: usize = parse(&get("tensors")?, "tensors", path)?;
-            let names = st.names();
+            let names = r.names();
             if names.len() != tensors || checksums.len() != tensors {
                 return Err(bad(format!(
                     "the file holds {} tensors and {} checksums; its metadata says {tensors}",
@@ -212,10 +201,7 @@ impl Checkpoint {
                 )));
             }
             for (name, sum) in &checksums {
-                let t = st
-                    .tensor(name)
-                    .map_err(|_| bad(format!("tensor {name} is missing")))?;
-                let actual = checksum(t.data());
+                let actual = checksum(r.bytes(name)?);
                 if &actual != sum {
                     return Err(bad(format!(
                         "tensor {name} is corrupt: its checksum is {actual}, the file says {sum}"
@@ -228,20 +214,7 @@ impl Checkpoint {
         let adam_steps: Vec<u64> = parse(&get("adam_steps")?, "adam_steps", path)?;
         let events: Vec<(usize, String)> = parse(&get("events")?, "events", path)?;
         let f64s = |name: &str, rank: usize| -> Result<Vec<f64>, BittError> {
-            let t = st
-                .tensor(name)
-                .map_err(|_| bad(format!("tensor {name} is missing")))?;
-            if t.dtype() != Dtype::F64 || t.shape().len() != rank {
-                return Err(bad(format!(
-                    "{name} is {:?} of shape {:?}",
-                    t.dtype(),
-                    t.shape()
-                )));
-            }
-            Ok(t.data()
-                .chunks_exact(8)
-                .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
-                .collect())
+            Ok(r.values::<f64>(name, &vec![None; rank])?.1)
         };
         let (lr_scale, seconds, history) = if legacy {
             let lr_scale: f64 = parse(&get("lr_scale")?, "lr_scale", path)?;
@@ -270,22 +243,10 @@ impl Checkpoint {
             (lr_scale, seconds, history)
         };
         let read = |name: &str| -> Result<Option<HostTensor>, BittError> {
-            let t = match st.tensor(name) {
-                Ok(t) => t,
-                Err(_) => return Ok(None),
-            };
-            if t.dtype() != Dtype::F32 {
-                return Err(bad(format!("{name} is {:?}, expected F32", t.dtype())));
+            if !r.has(name) {
+                return Ok(None);
             }
-            let values: Vec<f32> = t
-                .data()
-                .chunks_exact(4)
-                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-                .collect();
-            if values.iter().any(|v| !v.is_finite()) {
-                return Err(bad(format!("{name} holds non-finite values")));
-            }
-            Ok(Some((t.shape().to_vec(), values)))
+            Ok(Some(r.finite_f32s(name, None)?))
         };
         if !(adam_steps.is_empty() || adam_steps.len() == count) {
             return Err(bad(format!(

@@ -2,28 +2,18 @@
 
 use std::path::PathBuf;
 
+use bitt_mesh::FileError;
+
 /// Everything that can go wrong in the pipeline, the trainer and the run outputs.
 #[derive(Debug, thiserror::Error)]
 pub enum BittError {
     /// A configuration or input outside its documented range.
     #[error("{0}")]
     Invalid(String),
-    /// Reading or writing a file.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The cause.
-        source: std::io::Error,
-    },
-    /// A file that exists but is not what it should be.
-    #[error("{path}: {message}")]
-    Corrupt {
-        /// The file.
-        path: PathBuf,
-        /// What is wrong.
-        message: String,
-    },
+    /// Reading or writing a file ([`FileError::Io`]), or a file that exists but is not what
+    /// it should be ([`FileError::Format`]).
+    #[error(transparent)]
+    File(#[from] FileError),
     /// A loss or output that is not finite.
     #[error("non-finite value: {0}")]
     NonFinite(String),
@@ -64,17 +54,11 @@ pub enum BittError {
 impl BittError {
     /// An I/O error on `path`.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        BittError::Io {
-            path: path.into(),
-            source,
-        }
+        FileError::io(path, source).into()
     }
 
-    /// A corrupt file.
+    /// A corrupt file: one that exists but is not what it should be.
     pub fn corrupt(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
-        BittError::Corrupt {
-            path: path.into(),
-            message: message.into(),
-        }
+        FileError::format(path, message).into()
     }
 }

@@ -97,12 +97,7 @@ pub fn fit_camera(
 /// The pixel box `[x0, y0, x1, y1]` of both hands' projected vertices (either hand alone when
 /// only one is annotated).
 pub fn hands_box(hands: &TwoHandScene, models: &HandPair) -> Result<[f64; 4], BittError> {
-    let posed = hands.pose_in_camera(models)?;
-    let points: Vec<DVec3> = [posed.left, posed.right]
-        .into_iter()
-        .flatten()
-        .flat_map(|h| h.vertices)
-        .collect();
+    let points = hands.camera_vertices(models)?;
     let b = hands
         .pixel_box(&points)
         .ok_or_else(|| BittError::Invalid("no hand vertex is in front of the camera".into()))?;

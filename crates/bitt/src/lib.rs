@@ -11,11 +11,14 @@
 //! - [`metrics`], [`evaluate`]: image and texture metrics, renders at other views and poses.
 //! - [`lpips`]: LPIPS-VGG with user-provided weights (unavailable without them);
 //!   [`lpips_convert`] writes its weights file from the torch checkpoints.
-//! - [`outputs`], [`run`]: the run folder (textures, renders, avatar, metrics, report).
+//! - [`outputs`], [`run`]: the run folder (textures, renders, avatar, metrics, report);
+//!   [`run_folder`]: where a new run may go, its first files, a resumed run's checkpoints.
 //! - [`avatar_export`]: the avatar files: rigged `avatar.glb`, `avatar_static.glb`, OBJ.
 //! - [`saved`]: a trained run read back from its folder (either kind), for re-rendering and
 //!   re-exporting without the networks.
 //! - [`viewer`]: the report's interactive 3D view of the avatar (three.js, embedded).
+//! - [`figure`]: `bitt render`'s figures (both hands, each alone, masks, unwrapped images,
+//!   a grid of orthographic views).
 //! - [`plot`]: the loss plot (`loss.png`: axes, decade ticks, legend, learning-rate steps).
 //! - [`hand_layer`]: the hand model as a differentiable burn function (both hands batched).
 //! - [`refine`]: mesh refinement of both hands against the photo through the renderer.
@@ -32,6 +35,7 @@ pub mod config;
 pub mod demo;
 mod error;
 pub mod evaluate;
+pub mod figure;
 pub mod fit;
 pub mod hand_layer;
 pub mod hand_priors;
@@ -47,6 +51,7 @@ pub mod plot;
 pub mod real;
 pub mod refine;
 pub mod run;
+pub mod run_folder;
 pub mod saved;
 pub mod trainer;
 pub mod viewer;

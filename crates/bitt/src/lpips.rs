@@ -36,6 +36,8 @@ use burn::nn::pool::{MaxPool2d, MaxPool2dConfig};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor, TensorData};
 
+use bitt_mesh::st;
+
 use crate::BittError;
 
 /// The VGG16 `features` indices of the 13 convolutions with their `(in, out)` channels.
@@ -135,29 +137,20 @@ pub fn save_weights(
             )));
         }
     }
-    let bytes: Vec<Vec<u8>> = tensors
+    let entries: Vec<st::Entry> = tensors
         .iter()
-        .map(|(_, _, v)| v.iter().flat_map(|x| x.to_le_bytes()).collect())
-        .collect();
-    let views = tensors
-        .iter()
-        .zip(&bytes)
-        .map(|((n, s, _), b)| {
-            safetensors::tensor::TensorView::new(safetensors::Dtype::F32, s.clone(), b)
-                .map(|v| (n.clone(), v))
+        .map(|(n, s, v)| {
+            (
+                n.clone(),
+                safetensors::Dtype::F32,
+                s.clone(),
+                st::f32_bytes(v),
+            )
         })
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| BittError::Invalid(format!("{}: {e}", path.display())))?;
+        .collect();
     let meta =
         std::collections::HashMap::from([("format".to_string(), WEIGHTS_FORMAT.to_string())]);
-    let data = safetensors::serialize(views, Some(meta))
-        .map_err(|e| BittError::Invalid(format!("{}: {e}", path.display())))?;
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).map_err(|e| BittError::io(dir, e))?;
-    }
-    let tmp = path.with_extension("safetensors.tmp");
-    std::fs::write(&tmp, data).map_err(|e| BittError::io(&tmp, e))?;
-    std::fs::rename(&tmp, path).map_err(|e| BittError::io(path, e))
+    Ok(st::write(path, &entries, meta)?)
 }
 
 /// LPIPS-VGG, see the module docs.
@@ -231,42 +224,22 @@ impl LpipsVgg {
         path: &Path,
         device: &Device,
     ) -> Result<Self, BittError> {
-        let st = safetensors::SafeTensors::deserialize(bytes).map_err(|e| {
+        let r = st::Reader::open(bytes, path).map_err(|e| {
             BittError::corrupt(
                 path,
-                format!("not a safetensors file ({e}); write it with `bitt convert-lpips`"),
+                format!("{}; write it with `bitt convert-lpips`", e.detail()),
             )
         })?;
         Self::from_fn(
             |name, shape| {
-                let t = st.tensor(name).map_err(|_| {
+                let want: Vec<Option<usize>> = shape.iter().copied().map(Some).collect();
+                let (_, v) = r.finite_f32s(name, Some(&want)).map_err(|e| {
                     format!(
-                        "LPIPS weights: tensor {name:?} is missing (expected {WEIGHT_NAMES}; \
-                         write the file with `bitt convert-lpips`)"
+                        "LPIPS weights: {} (expected {WEIGHT_NAMES}; write the file with \
+                         `bitt convert-lpips`)",
+                        e.detail()
                     )
                 })?;
-                if t.dtype() != safetensors::Dtype::F32 {
-                    return Err(format!(
-                        "LPIPS weights: tensor {name:?} has dtype {:?}, expected F32",
-                        t.dtype()
-                    ));
-                }
-                if t.shape() != shape {
-                    return Err(format!(
-                        "LPIPS weights: tensor {name:?} has shape {:?}, expected {shape:?}",
-                        t.shape()
-                    ));
-                }
-                let v: Vec<f32> = t
-                    .data()
-                    .chunks_exact(4)
-                    .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-                    .collect();
-                if let Some(i) = v.iter().position(|x| !x.is_finite()) {
-                    return Err(format!(
-                        "LPIPS weights: tensor {name:?} has a non-finite value at {i}"
-                    ));
-                }
                 Ok(v)
             },
             device,

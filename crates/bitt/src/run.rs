@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use bitt_mesh::glam::{DMat3, DVec3};
-use bitt_mesh::{PinholeCamera, TwoHandScene, procedural_pair};
+use bitt_mesh::{PinholeCamera, TwoHandScene, procedural_pair, st};
 use bitt_render::scene::LightValues;
 use bitt_synth::SynthScene;
 use bitt_texture::{FitProgress, NoProgress, TexturePca, procedural_texture_model};
@@ -606,23 +606,18 @@ fn write_texture_safetensors(
     texels: usize,
     size: usize,
 ) -> Result<(), BittError> {
-    let bytes: Vec<(String, Vec<u8>, Vec<usize>)> = entries
+    let tensors: Vec<st::Entry> = entries
         .iter()
         .map(|(n, v)| {
             let c = v.len() / texels.max(1);
             (
                 n.clone(),
-                v.iter().flat_map(|x| x.to_le_bytes()).collect(),
+                safetensors::Dtype::F32,
                 vec![c, texels],
+                st::f32_bytes(v),
             )
         })
         .collect();
-    let mut views = Vec::new();
-    for (name, b, shape) in &bytes {
-        let view = safetensors::tensor::TensorView::new(safetensors::Dtype::F32, shape.clone(), b)
-            .map_err(|e| BittError::corrupt(path, format!("cannot encode {name}: {e}")))?;
-        views.push((name.clone(), view));
-    }
     let meta = std::collections::HashMap::from([
         ("format".to_string(), "bitt-run-textures".to_string()),
         (
@@ -632,10 +627,7 @@ fn write_texture_safetensors(
             ),
         ),
     ]);
-    let data = safetensors::serialize(views, Some(meta))
-        .map_err(|e| BittError::corrupt(path, format!("cannot encode: {e}")))?;
-    bitt_mesh::export::write_atomically(path, &data)?;
-    Ok(())
+    Ok(st::write(path, &tensors, meta)?)
 }
 
 fn fmt_metrics(m: &ImageMetrics) -> String {
@@ -893,12 +885,7 @@ impl SavedAvatar {
             }
         };
         hands.camera = self.camera;
-        let posed = hands.pose_in_camera(&procedural_pair())?;
-        let all: Vec<DVec3> = [posed.left, posed.right]
-            .into_iter()
-            .flatten()
-            .flat_map(|h| h.vertices)
-            .collect();
+        let all = hands.camera_vertices(&procedural_pair())?;
         let center = all.iter().copied().sum::<DVec3>() / all.len().max(1) as f64;
         hands.camera = orbit_camera(&self.camera, center, yaw, pitch);
         Ok(hands)
@@ -913,35 +900,10 @@ impl SavedAvatar {
     /// `textures/textures.safetensors`.
     pub fn read_fine_textures(dir: &Path) -> Result<[Vec<f32>; 2], BittError> {
         let path = dir.join("textures/textures.safetensors");
-        let bytes = std::fs::read(&path).map_err(|e| BittError::io(&path, e))?;
-        let st = safetensors::SafeTensors::deserialize(&bytes)
-            .map_err(|e| BittError::corrupt(&path, format!("not a safetensors file: {e}")))?;
+        let bytes = st::read_file(&path)?;
+        let r = st::Reader::open(&bytes, &path)?;
         let texture = |name: &str| -> Result<Vec<f32>, BittError> {
-            let t = st
-                .tensor(name)
-                .map_err(|_| BittError::corrupt(&path, format!("`{name}` is missing")))?;
-            if t.dtype() != safetensors::Dtype::F32 || t.shape().len() != 2 || t.shape()[0] != 3 {
-                return Err(BittError::corrupt(
-                    &path,
-                    format!(
-                        "`{name}` is {:?} {:?}, expected F32 [3, T]",
-                        t.dtype(),
-                        t.shape()
-                    ),
-                ));
-            }
-            let v: Vec<f32> = t
-                .data()
-                .chunks_exact(4)
-                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-                .collect();
-            if v.iter().any(|x| !x.is_finite()) {
-                return Err(BittError::corrupt(
-                    &path,
-                    format!("`{name}` holds non-finite values"),
-                ));
-            }
-            Ok(v)
+            Ok(r.finite_f32s(name, Some(&[Some(3), None]))?.1)
         };
         Ok([texture("left.fine")?, texture("right.fine")?])
     }

@@ -2,7 +2,7 @@
 //! `avatar.glb` with three.js, lit by the estimated light.
 //!
 //! The fragment is self-contained and works offline, from `file://` too: three.js (vendored
-//! in `crates/bitt/assets/three/`, see its README) is embedded as ES modules behind an
+//! in `crates/bitt/assets/vendor/three/`, see its README) is embedded as ES modules behind an
 //! import map whose entries are `data:text/javascript;base64,...` URLs, and the GLB is
 //! embedded as base64 and handed to `GLTFLoader.parse`. A data URL has no hierarchy, so the
 //! modules' relative imports (`./three.core.js`, `../utils/...`) are rewritten here to bare
@@ -37,7 +37,7 @@ use crate::BittError;
 use crate::outputs::base64;
 use crate::run::files;
 
-/// The vendored three.js release (`crates/bitt/assets/three/README.md`).
+/// The vendored three.js release (`crates/bitt/assets/vendor/three/README.md`).
 pub const THREE_VERSION: &str = "0.187.0";
 
 /// The ids of the viewer's elements: canvas, controls, status.
@@ -79,27 +79,27 @@ struct Module {
 const MODULES: [Module; 6] = [
     Module {
         specifier: "three",
-        source: include_str!("../assets/three/three.module.min.js"),
+        source: include_str!("../assets/vendor/three/three.module.min.js"),
         rewrites: &[("\"./three.core.js\"", "\"three/core\"")],
     },
     Module {
         specifier: "three/core",
-        source: include_str!("../assets/three/three.core.min.js"),
+        source: include_str!("../assets/vendor/three/three.core.min.js"),
         rewrites: &[],
     },
     Module {
         specifier: "three/addons/utils/BufferGeometryUtils.js",
-        source: include_str!("../assets/three/BufferGeometryUtils.min.js"),
+        source: include_str!("../assets/vendor/three/BufferGeometryUtils.min.js"),
         rewrites: &[],
     },
     Module {
         specifier: "three/addons/utils/SkeletonUtils.js",
-        source: include_str!("../assets/three/SkeletonUtils.min.js"),
+        source: include_str!("../assets/vendor/three/SkeletonUtils.min.js"),
         rewrites: &[],
     },
     Module {
         specifier: "three/addons/loaders/GLTFLoader.js",
-        source: include_str!("../assets/three/GLTFLoader.min.js"),
+        source: include_str!("../assets/vendor/three/GLTFLoader.min.js"),
         rewrites: &[
             (
                 "\"../utils/BufferGeometryUtils.js\"",
@@ -113,7 +113,7 @@ const MODULES: [Module; 6] = [
     },
     Module {
         specifier: "three/addons/controls/OrbitControls.js",
-        source: include_str!("../assets/three/OrbitControls.min.js"),
+        source: include_str!("../assets/vendor/three/OrbitControls.min.js"),
         rewrites: &[],
     },
 ];

@@ -11,6 +11,7 @@ use std::path::Path;
 use glam::{DVec2, DVec3};
 use serde_json::json;
 
+use crate::FileErrorExt;
 use crate::MeshError;
 use crate::model::UvLayout;
 

@@ -18,14 +18,15 @@ use std::sync::Arc;
 
 use burn::backend::Flex;
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
-use burn::backend::autodiff::checkpoint::strategy::NoCheckpointing;
 use burn::backend::autodiff::grads::Gradients;
-use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::autodiff::ops::{Backward, Ops};
 use burn::backend::flex::FlexTensor;
-use burn::tensor::{DType, Tensor};
+use burn::tensor::Tensor;
 
 use super::kernels2d::{self, Conv2dDims, PostDims, RowStats};
-use super::{FlexAutodiff, contiguous, flex_tensor, values};
+use super::{
+    contiguous, flex_tensor, output_gradient_buffer, register_channel_grads, run_on_flex, values,
+};
 
 pub(crate) use super::kernels2d::Activation;
 
@@ -117,50 +118,13 @@ pub(crate) fn conv2d_norm_act(x: &Tensor<4>, block: &Conv2dBlock<'_>) -> Option<
         post,
         has_bias: block.bias.is_some(),
     };
-    let f32s = |ts: &[&FlexTensor]| ts.iter().all(|t| t.dtype() == DType::F32);
-    if let Ok(xa) = x.clone().try_into_primitive::<FlexAutodiff>() {
-        let [weight, bias, gamma, beta] = [
-            block
-                .weight
-                .clone()
-                .try_into_primitive::<FlexAutodiff>()
-                .ok()?,
-            bias.clone().try_into_primitive::<FlexAutodiff>().ok()?,
-            gamma.try_into_primitive::<FlexAutodiff>().ok()?,
-            beta.try_into_primitive::<FlexAutodiff>().ok()?,
-        ];
-        let inputs = [&xa, &weight, &bias, &gamma, &beta];
-        if !f32s(&inputs.map(|t| t.primitive())) {
-            return None;
-        }
-        let nodes = inputs.map(|t| t.node());
-        let (y, saved) = forward(
-            xa.primitive(),
-            [&weight, &bias, &gamma, &beta].map(|t| t.primitive()),
-            meta,
-        );
-        let out = match Conv2dNormActBackward
-            .prepare::<NoCheckpointing>(nodes)
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(prep) => prep.finish(saved, y),
-            OpsKind::UnTracked(prep) => prep.finish(y),
-        };
-        return Some(Tensor::from_primitive::<FlexAutodiff>(out));
-    }
-    let xf = x.clone().try_into_primitive::<Flex>().ok()?;
-    let [weight, bias, gamma, beta] = [
-        block.weight.clone().try_into_primitive::<Flex>().ok()?,
-        bias.try_into_primitive::<Flex>().ok()?,
-        gamma.try_into_primitive::<Flex>().ok()?,
-        beta.try_into_primitive::<Flex>().ok()?,
-    ];
-    if !f32s(&[&xf, &weight, &bias, &gamma, &beta]) {
-        return None;
-    }
-    let (y, _) = forward(&xf, [&weight, &bias, &gamma, &beta], meta);
-    Some(Tensor::from_primitive::<Flex>(y))
+    run_on_flex(
+        x,
+        block.weight,
+        [&bias, &gamma, &beta],
+        Conv2dNormActBackward,
+        |x, params| forward(x, params, meta),
+    )
 }
 
 /// The sizes of one call.
@@ -234,25 +198,17 @@ impl Backward<Flex, 5> for Conv2dNormActBackward {
         let [node_x, node_weight, node_bias, node_gamma, node_beta] = ops.parents;
         let s = ops.state;
         let mut gy = contiguous(&grads.consume::<Flex>(&ops.node));
-        let n = s.z.len();
-        // dz overwrites the output gradient when nothing else holds it (saves a buffer).
-        let unique = gy.try_storage_mut::<f32>().is_some_and(|b| b.len() == n);
-        let mut copy: Vec<f32>;
-        let dz: &mut [f32] = if unique {
-            gy.try_storage_mut::<f32>().expect("unique gradient")
-        } else {
-            copy = gy.as_slice::<f32>().expect("contiguous f32").to_vec();
-            &mut copy
-        };
+        let mut buffer = output_gradient_buffer(&mut gy, s.z.len());
+        let dz = buffer.as_mut_slice();
         let [dbias, dgamma, dbeta] =
             kernels2d::post_backward_in_place(dz, &s.z, &s.gamma, &s.beta, &s.stats, s.meta.post);
         let dz: &[f32] = dz;
+        register_channel_grads(
+            grads,
+            [node_bias, node_gamma, node_beta].map(|n| n.map(|n| n.id)),
+            [dbias, dgamma, dbeta],
+        );
         let c_out = s.meta.conv.c_out;
-        for (node, values) in [(node_bias, dbias), (node_gamma, dgamma), (node_beta, dbeta)] {
-            if let Some(node) = node {
-                grads.register::<Flex>(node.id, flex_tensor(values, [c_out]));
-            }
-        }
         let d = s.meta.conv;
         let (dx, dw) = kernels2d::conv2d_backward(
             dz,

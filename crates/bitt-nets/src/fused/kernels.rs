@@ -137,7 +137,7 @@ fn shifted_products(
     if taps.len() == 1 || first.cols > IM2COL_MAX_CHANNELS {
         per_tap_products(dst, src, len, taps, parallel);
     } else {
-        stacked_products(dst, src, len, taps, parallel);
+        stacked_products(dst, src, len, taps, [first.rows, first.cols], parallel);
     }
 }
 
@@ -170,12 +170,9 @@ fn stacked_products(
     src: &[f32],
     len: usize,
     taps: &[(MatRef<'_>, isize)],
+    [rows_out, rows_in]: [usize; 2],
     parallel: bool,
 ) {
-    let Some(&(first, _)) = taps.first() else {
-        return;
-    };
-    let (rows_out, rows_in) = (first.rows, first.cols);
     // The taps side by side, `[rows_out, taps * rows_in]`, and blocks of stacked shifted rows.
     let k = taps.len() * rows_in;
     let mut combined = vec![0.0f32; rows_out * k];
@@ -233,13 +230,8 @@ fn stacked_products(
 /// - `x`: `[batch, c_in, len]`; `weight`: `[c_out, c_in, kernel]`
 /// - output: `[batch, c_out, len]`
 pub(crate) fn conv_forward(x: &[f32], weight: &[f32], d: ConvDims) -> Vec<f32> {
-    assert_eq!(x.len(), d.batch * d.c_in * d.len, "conv_forward: x");
     assert_eq!(weight.len(), d.c_out * d.c_in * d.kernel, "conv_forward: w");
-    let taps: Vec<(MatRef<'_>, isize)> = d
-        .taps()
-        .map(|(j, offset)| (d.tap(weight, j), offset))
-        .collect();
-    batched_products(x, d.batch, d.c_out, d.len, &taps)
+    tap_products(x, weight, d, false)
 }
 
 /// Gradient of [`conv_forward`] with respect to `x`.
@@ -248,17 +240,39 @@ pub(crate) fn conv_forward(x: &[f32], weight: &[f32], d: ConvDims) -> Vec<f32> {
 /// - `dz`: `[batch, c_out, len]`; `weight`: `[c_out, c_in, kernel]`
 /// - output: `[batch, c_in, len]`
 pub(crate) fn conv_backward_input(dz: &[f32], weight: &[f32], d: ConvDims) -> Vec<f32> {
-    assert_eq!(
-        dz.len(),
-        d.batch * d.c_out * d.len,
-        "conv_backward_input: dz"
-    );
     // dx[:, s] += W_j^T dz[:, s - offset_j].
+    tap_products(dz, weight, d, true)
+}
+
+/// The convolution's taps applied to `src`: `W_j src[:, t + offset_j]` summed over the taps
+/// (`transposed = false`, the forward pass), or `W_j^T src[:, t - offset_j]` (`true`, the
+/// gradient with respect to the input).
+///
+/// # Shapes
+/// - `src`: `[batch, c_in, len]` (`[batch, c_out, len]` when `transposed`)
+/// - output: `[batch, c_out, len]` (`[batch, c_in, len]` when `transposed`)
+fn tap_products(src: &[f32], weight: &[f32], d: ConvDims, transposed: bool) -> Vec<f32> {
+    let (rows_in, rows_out) = if transposed {
+        (d.c_out, d.c_in)
+    } else {
+        (d.c_in, d.c_out)
+    };
+    assert_eq!(
+        src.len(),
+        d.batch * rows_in * d.len,
+        "conv taps: input size"
+    );
     let taps: Vec<(MatRef<'_>, isize)> = d
         .taps()
-        .map(|(j, offset)| (d.tap_t(weight, j), -offset))
+        .map(|(j, offset)| {
+            if transposed {
+                (d.tap_t(weight, j), -offset)
+            } else {
+                (d.tap(weight, j), offset)
+            }
+        })
         .collect();
-    batched_products(dz, d.batch, d.c_in, d.len, &taps)
+    batched_products(src, d.batch, rows_out, d.len, &taps)
 }
 
 /// Gradient of [`conv_forward`] with respect to the weight. The texel axis (the long
@@ -642,6 +656,7 @@ pub(crate) fn norm_silu_backward_in_place(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_util::assert_conv_adjoints;
     use bitt_testkit::{assert_close, values};
 
     /// The convolution as the textbook triple loop.
@@ -691,27 +706,15 @@ mod tests {
             let g = values(batch * c_out * len, 3);
             let z = conv_forward(&x, &w, d);
             assert_close(&z, &conv_naive(&x, &w, d), 1e-5, "forward");
-            let dot = |a: &[f32], b: &[f32]| -> f64 {
-                a.iter().zip(b).map(|(a, b)| f64::from(a * b)).sum()
-            };
-            let zg = dot(&z, &g);
             let dx = conv_backward_input(&g, &w, d);
             let dw = conv_backward_weight(&g, &x, d);
-            assert!(
-                (dot(&x, &dx) - zg).abs() < 1e-4 * zg.abs().max(1.0),
-                "dx {d:?}"
+            assert_conv_adjoints(
+                [&x, &w, &g],
+                [&dx, &dw],
+                |x, w| conv_naive(x, w, d),
+                [1e-4, 1e-5, 1e-4],
+                &format!("{d:?}"),
             );
-            assert!(
-                (dot(&w, &dw) - zg).abs() < 1e-4 * zg.abs().max(1.0),
-                "dw {d:?}"
-            );
-            // And element-wise: dx is the naive convolution's gradient (one-hot probes).
-            for probe in [0, x.len() / 2, x.len() - 1] {
-                let mut e = vec![0.0; x.len()];
-                e[probe] = 1.0;
-                let expect = dot(&conv_naive(&e, &w, d), &g);
-                assert!((f64::from(dx[probe]) - expect).abs() < 1e-5, "dx[{probe}]");
-            }
         }
     }
 
@@ -740,7 +743,7 @@ mod tests {
                 let mut a = vec![0.0; rows_out * len];
                 let mut b = vec![0.0; rows_out * len];
                 per_tap_products(&mut a, &src, len, &taps, false);
-                stacked_products(&mut b, &src, len, &taps, true);
+                stacked_products(&mut b, &src, len, &taps, [rows_out, rows_in], true);
                 assert_close(&b, &a, 1e-5, "stacked vs per tap");
             }
         }

@@ -730,6 +730,7 @@ pub(crate) fn post_backward_in_place(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_util::assert_conv_adjoints;
     use bitt_testkit::{assert_close, values};
 
     /// The convolution as the textbook loop nest, in f64.
@@ -814,40 +815,13 @@ mod tests {
             let g = values(z.len(), 4);
             let (dx, dw) = conv2d_backward(&g, &x, &w, d, true, true);
             let (dx, dw) = (dx.unwrap(), dw.unwrap());
-            let dot = |a: &[f32], b: &[f32]| -> f64 {
-                a.iter()
-                    .zip(b)
-                    .map(|(a, b)| f64::from(*a) * f64::from(*b))
-                    .sum()
-            };
-            let zg = dot(&conv_naive(&x, &w, &[], d), &g);
-            assert!(
-                (dot(&x, &dx) - zg).abs() < 1e-3 * zg.abs().max(1.0),
-                "dx {d:?}"
+            assert_conv_adjoints(
+                [&x, &w, &g],
+                [&dx, &dw],
+                |x, w| conv_naive(x, w, &[], d),
+                [1e-3, 1e-4, 1e-3],
+                &format!("{d:?}"),
             );
-            assert!(
-                (dot(&w, &dw) - zg).abs() < 1e-3 * zg.abs().max(1.0),
-                "dw {d:?}"
-            );
-            for probe in [0, x.len() / 3, x.len() - 1] {
-                let mut e = vec![0.0; x.len()];
-                e[probe] = 1.0;
-                let expect = dot(&conv_naive(&e, &w, &[], d), &g);
-                assert!(
-                    (f64::from(dx[probe]) - expect).abs() < 1e-4,
-                    "dx[{probe}] {d:?}"
-                );
-            }
-            for probe in [0, w.len() / 2, w.len() - 1] {
-                let mut e = vec![0.0; w.len()];
-                e[probe] = 1.0;
-                let expect = dot(&conv_naive(&x, &e, &[], d), &g);
-                assert!(
-                    (f64::from(dw[probe]) - expect).abs() < 1e-3 * expect.abs().max(1.0),
-                    "dw[{probe}] {d:?}: {} vs {expect}",
-                    dw[probe]
-                );
-            }
             // Only one of the two asked for.
             let (none, only_w) = conv2d_backward(&g, &x, &w, d, false, true);
             assert!(none.is_none());

@@ -28,6 +28,7 @@ use std::sync::Arc;
 
 use burn::backend::Flex;
 use burn::backend::autodiff::Autodiff;
+use burn::backend::autodiff::NodeId;
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::NoCheckpointing;
 use burn::backend::autodiff::grads::Gradients;
@@ -86,13 +87,35 @@ pub(crate) fn conv_norm_silu(x: &Tensor<3>, p: &BlockParams) -> Option<Tensor<3>
         groups: p.groups,
         epsilon: p.epsilon,
     };
+    run_on_flex(
+        x,
+        &p.weight,
+        [&p.bias, &p.gamma, &p.beta],
+        ConvNormSiluBackward,
+        |x, params| forward(x, params, conv, norm),
+    )
+}
+
+/// Runs a fused operation of five `f32` inputs `(x, weight, bias, gamma, beta)` on flex:
+/// with autodiff (its backward `op` registered when an input is tracked) or without.
+/// `None`, with nothing computed, when a tensor is not on flex or not `f32`.
+///
+/// `forward` gets the inputs' flex tensors and returns the output and the state the
+/// backward pass keeps.
+fn run_on_flex<const DX: usize, const DW: usize, const DY: usize, Op: Backward<Flex, 5>>(
+    x: &Tensor<DX>,
+    weight: &Tensor<DW>,
+    [bias, gamma, beta]: [&Tensor<1>; 3],
+    op: Op,
+    forward: impl FnOnce(&FlexTensor, [&FlexTensor; 4]) -> (FlexTensor, Op::State),
+) -> Option<Tensor<DY>> {
     let f32s = |ts: &[&FlexTensor]| ts.iter().all(|t| t.dtype() == DType::F32);
     if let Ok(xa) = x.clone().try_into_primitive::<FlexAutodiff>() {
         let [weight, bias, gamma, beta] = [
-            p.weight.clone().try_into_primitive::<FlexAutodiff>().ok()?,
-            p.bias.clone().try_into_primitive::<FlexAutodiff>().ok()?,
-            p.gamma.clone().try_into_primitive::<FlexAutodiff>().ok()?,
-            p.beta.clone().try_into_primitive::<FlexAutodiff>().ok()?,
+            weight.clone().try_into_primitive::<FlexAutodiff>().ok()?,
+            bias.clone().try_into_primitive::<FlexAutodiff>().ok()?,
+            gamma.clone().try_into_primitive::<FlexAutodiff>().ok()?,
+            beta.clone().try_into_primitive::<FlexAutodiff>().ok()?,
         ];
         let inputs = [&xa, &weight, &bias, &gamma, &beta];
         if !f32s(&inputs.map(|t| t.primitive())) {
@@ -102,10 +125,8 @@ pub(crate) fn conv_norm_silu(x: &Tensor<3>, p: &BlockParams) -> Option<Tensor<3>
         let (y, saved) = forward(
             xa.primitive(),
             [&weight, &bias, &gamma, &beta].map(|t| t.primitive()),
-            conv,
-            norm,
         );
-        let out = match ConvNormSiluBackward
+        let out = match op
             .prepare::<NoCheckpointing>(nodes)
             .compute_bound()
             .stateful()
@@ -117,16 +138,53 @@ pub(crate) fn conv_norm_silu(x: &Tensor<3>, p: &BlockParams) -> Option<Tensor<3>
     }
     let xf = x.clone().try_into_primitive::<Flex>().ok()?;
     let [weight, bias, gamma, beta] = [
-        p.weight.clone().try_into_primitive::<Flex>().ok()?,
-        p.bias.clone().try_into_primitive::<Flex>().ok()?,
-        p.gamma.clone().try_into_primitive::<Flex>().ok()?,
-        p.beta.clone().try_into_primitive::<Flex>().ok()?,
+        weight.clone().try_into_primitive::<Flex>().ok()?,
+        bias.clone().try_into_primitive::<Flex>().ok()?,
+        gamma.clone().try_into_primitive::<Flex>().ok()?,
+        beta.clone().try_into_primitive::<Flex>().ok()?,
     ];
     if !f32s(&[&xf, &weight, &bias, &gamma, &beta]) {
         return None;
     }
-    let (y, _) = forward(&xf, [&weight, &bias, &gamma, &beta], conv, norm);
+    let (y, _) = forward(&xf, [&weight, &bias, &gamma, &beta]);
     Some(Tensor::from_primitive::<Flex>(y))
+}
+
+/// The output gradient of a fused operation as a writable buffer for `dz`: the gradient's
+/// own storage when nothing else holds it (saves a buffer of the output's size), else a
+/// copy. `len` is the output's element count.
+fn output_gradient_buffer(gy: &mut FlexTensor, len: usize) -> GradientBuffer<'_> {
+    if gy.try_storage_mut::<f32>().is_some_and(|b| b.len() == len) {
+        GradientBuffer::Unique(gy.try_storage_mut::<f32>().expect("unique gradient"))
+    } else {
+        GradientBuffer::Copy(gy.as_slice::<f32>().expect("contiguous f32").to_vec())
+    }
+}
+
+/// Registers the gradients of a fused operation's per-channel parameters (bias, gamma,
+/// beta; each `[C_out]`) for those that are tracked.
+fn register_channel_grads(grads: &mut Gradients, ids: [Option<NodeId>; 3], values: [Vec<f32>; 3]) {
+    for (id, values) in ids.into_iter().zip(values) {
+        if let Some(id) = id {
+            let len = values.len();
+            grads.register::<Flex>(id, flex_tensor(values, [len]));
+        }
+    }
+}
+
+/// See [`output_gradient_buffer`].
+enum GradientBuffer<'a> {
+    Unique(&'a mut [f32]),
+    Copy(Vec<f32>),
+}
+
+impl GradientBuffer<'_> {
+    fn as_mut_slice(&mut self) -> &mut [f32] {
+        match self {
+            GradientBuffer::Unique(s) => s,
+            GradientBuffer::Copy(v) => v,
+        }
+    }
 }
 
 /// The forward pass on flex tensors (all `f32`): the output `[N, C_out, T]` and what the
@@ -182,26 +240,18 @@ impl Backward<Flex, 5> for ConvNormSiluBackward {
         let [node_x, node_weight, node_bias, node_gamma, node_beta] = ops.parents;
         let s = ops.state;
         let mut gy = contiguous(&grads.consume::<Flex>(&ops.node));
-        let n = s.conv.batch * s.conv.c_out * s.conv.len;
-        // dz overwrites the output gradient when nothing else holds it (saves a buffer).
-        let unique = gy.try_storage_mut::<f32>().is_some_and(|b| b.len() == n);
-        let mut copy: Vec<f32>;
-        let dz: &mut [f32] = if unique {
-            gy.try_storage_mut::<f32>().expect("unique gradient")
-        } else {
-            copy = gy.as_slice::<f32>().expect("contiguous f32").to_vec();
-            &mut copy
-        };
+        let mut buffer = output_gradient_buffer(&mut gy, s.z.len());
+        let dz = buffer.as_mut_slice();
         let [dbias, dgamma, dbeta] = kernels::norm_silu_backward_in_place(
             dz, &s.z, &s.bias, &s.gamma, &s.beta, &s.stats, s.norm,
         );
         let dz: &[f32] = dz;
+        register_channel_grads(
+            grads,
+            [node_bias, node_gamma, node_beta].map(|n| n.map(|n| n.id)),
+            [dbias, dgamma, dbeta],
+        );
         let c_out = s.conv.c_out;
-        for (node, values) in [(node_bias, dbias), (node_gamma, dgamma), (node_beta, dbeta)] {
-            if let Some(node) = node {
-                grads.register::<Flex>(node.id, flex_tensor(values, [c_out]));
-            }
-        }
         let x = s.x.as_slice::<f32>().expect("contiguous f32");
         let ConvDims {
             batch,

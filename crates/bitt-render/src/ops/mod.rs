@@ -31,11 +31,13 @@
 //! them into a `[C, H, W]` image with a background.
 
 mod antialias;
+mod dense;
 mod interpolate;
 mod raster;
 mod texture;
 
 pub use antialias::{AntialiasPlan, SilhouettePairs, antialias, silhouette_pairs};
+pub use dense::{DenseRaster, RasterKernel, rasterize_dense};
 pub use interpolate::{interpolate, interpolate_with_faces};
 pub use raster::{Raster, rasterize};
 pub use texture::{TexturePlan, texture};
@@ -159,11 +161,22 @@ pub(crate) fn check_shape<const D: usize>(
     }
 }
 
-/// Reads a float tensor back to the host.
+/// Host readbacks made by this crate since the process started (see [`host_readbacks`]).
+static HOST_READBACKS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// How many times this crate has read a tensor back to the host (`into_data`) since the
+/// process started, over all threads. On a GPU each one waits for the device to finish its
+/// queued work; take the difference around a step to count that step's round trips.
+pub fn host_readbacks() -> u64 {
+    HOST_READBACKS.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+/// Reads a float tensor back to the host (counted in [`host_readbacks`]).
 pub(crate) fn read_f32<const D: usize>(
     what: &'static str,
     tensor: burn::tensor::Tensor<D>,
 ) -> Result<Vec<f32>, RenderError> {
+    HOST_READBACKS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     tensor
         .into_data()
         .convert::<f32>()

@@ -1,6 +1,7 @@
 //! Tests of the public API, with shared helpers.
 
 mod coverage;
+mod dense;
 mod depth;
 mod errors;
 mod grads;

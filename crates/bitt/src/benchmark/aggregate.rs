@@ -22,31 +22,12 @@ fn mean_texel_errors<'a>(all: impl Iterator<Item = &'a TexelErrors> + Clone) -> 
     }
 }
 
-/// Mean image metrics over scenes (`ms_ssim` only when every scene has it).
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct MeanMetrics {
-    /// Mean L1.
-    pub l1: f64,
-    /// Mean PSNR (dB).
-    pub psnr: f64,
-    /// Mean SSIM.
-    pub ssim: f64,
-    /// Mean MS-SSIM.
-    pub ms_ssim: Option<f64>,
-    /// Mean LPIPS-VGG (only when every scene has it).
-    #[serde(default)]
-    pub lpips: Option<f64>,
-}
+/// Mean image metrics over scenes ([`crate::evaluate::mean_metrics`]: `ms_ssim` and `lpips`
+/// only when every scene has them): the same fields as one pair's.
+pub type MeanMetrics = ImageMetrics;
 
 fn mean_metrics(all: &[ImageMetrics]) -> Option<MeanMetrics> {
-    let m = crate::evaluate::mean_metrics(all)?;
-    Some(MeanMetrics {
-        l1: m.l1,
-        psnr: m.psnr,
-        ssim: m.ssim,
-        ms_ssim: m.ms_ssim,
-        lpips: m.lpips,
-    })
+    crate::evaluate::mean_metrics(all)
 }
 
 /// One method's scores averaged over the scenes of one mesh setting.

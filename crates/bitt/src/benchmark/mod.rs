@@ -18,6 +18,7 @@ use std::collections::BTreeMap;
 
 use bitt_synth::TexelStats;
 
+use crate::BittError;
 use crate::config::TrainConfig;
 use crate::metrics::ImageMetrics;
 pub use crate::metrics::TexelErrors;
@@ -91,6 +92,35 @@ impl Method {
         Method::ALL.into_iter().find(|m| m.key() == key)
     }
 
+    /// The methods of `bitt eval --methods` (keys; empty: all but [`Method::BittRefined`]),
+    /// with [`Method::BittRefined`] added when `refine_mesh`.
+    ///
+    /// # Errors
+    /// An unknown key, named with the known ones.
+    pub fn parse_list(keys: &[String], refine_mesh: bool) -> Result<Vec<Method>, BittError> {
+        let mut methods: Vec<Method> = if keys.is_empty() {
+            Method::ALL
+                .into_iter()
+                .filter(|m| *m != Method::BittRefined)
+                .collect()
+        } else {
+            keys.iter()
+                .map(|k| {
+                    Method::from_key(k.trim()).ok_or_else(|| {
+                        BittError::Invalid(format!(
+                            "--methods: unknown method `{k}` (known: {})",
+                            Method::ALL.map(|m| m.key()).join(", ")
+                        ))
+                    })
+                })
+                .collect::<Result<_, _>>()?
+        };
+        if refine_mesh && !methods.contains(&Method::BittRefined) {
+            methods.push(Method::BittRefined);
+        }
+        Ok(methods)
+    }
+
     /// The row label of the tables.
     pub fn label(self) -> &'static str {
         match self {
@@ -142,6 +172,21 @@ impl MeshSetting {
         match self {
             MeshSetting::GtMesh => "gt-mesh",
             MeshSetting::NoisyMesh => "noisy-mesh",
+        }
+    }
+
+    /// The settings of `bitt eval --mesh`: `both`, `gt-mesh` or `noisy-mesh`.
+    ///
+    /// # Errors
+    /// Any other word.
+    pub fn parse_choice(choice: &str) -> Result<Vec<MeshSetting>, BittError> {
+        match choice {
+            "both" => Ok(MeshSetting::ALL.to_vec()),
+            "gt-mesh" => Ok(vec![MeshSetting::GtMesh]),
+            "noisy-mesh" => Ok(vec![MeshSetting::NoisyMesh]),
+            other => Err(BittError::Invalid(format!(
+                "--mesh {other}: expected both, gt-mesh or noisy-mesh"
+            ))),
         }
     }
 }

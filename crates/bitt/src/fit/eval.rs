@@ -1,15 +1,59 @@
 //! The keypoint fit on synthetic scenes, where the true joints and camera are known: noisy
 //! keypoints from the true 2D joints (`keypoints_2d` of `scene.json`) and the fit's scores.
 
+use std::path::Path;
+
 use bitt_mesh::glam::DVec2;
 use bitt_mesh::keypoints::{NUM_KEYPOINTS, TwoHandKeypoints};
-use bitt_mesh::{PinholeCamera, Side, procedural_pair};
+use bitt_mesh::{PinholeCamera, Side, TwoHandScene, procedural_pair};
 use bitt_synth::SynthScene;
 use bitt_texture::procedural::noise::SplitMix64;
 
-use super::KeypointFit;
+use super::{KeypointFit, keypoint_overlay};
 use crate::BittError;
+use crate::assets::HandAssets;
 use crate::hand_priors::{FLEXION_RANGE, flexion_angles, flexion_axes};
+use crate::run_folder::FitOutput;
+
+/// A keypoint fit of `scene`'s training view (seen by `camera`, with the keypoints `points`
+/// read from `keypoints`) as a run folder records it (`train-scene --scene DIR --keypoints
+/// FILE`): its scores against the true hands, and `fit.json`'s record with the overlay. The
+/// fitted hands become the scene's given meshes (in the scene's own camera).
+///
+/// # Errors
+/// Hands that cannot be posed or rendered.
+pub fn record_synthetic_fit(
+    fit: &KeypointFit,
+    scene: &mut SynthScene,
+    points: &TwoHandKeypoints,
+    camera: &PinholeCamera,
+    keypoints: &Path,
+) -> Result<(FitScores, FitOutput), BittError> {
+    let scores = score_fit(fit, scene, camera)?;
+    let models = procedural_pair();
+    let assets = HandAssets::new(models.clone(), 64)?;
+    let overlay = keypoint_overlay(
+        &scene.train.image,
+        &models,
+        &assets,
+        points,
+        &TwoHandScene {
+            camera: *camera,
+            ..fit.hands.clone()
+        },
+    )?;
+    scene.given = TwoHandScene {
+        camera: scene.given.camera,
+        ..fit.hands.clone()
+    };
+    let record = serde_json::json!({
+        "kind": "keypoint fit (synthetic scene)",
+        "keypoints": keypoints.display().to_string(),
+        "report": fit.report,
+        "scores_vs_truth": scores,
+    });
+    Ok((scores, FitOutput { record, overlay }))
+}
 
 /// The training view's true 2D joints with noise and dropped points.
 #[derive(Debug, Clone)]
@@ -165,5 +209,110 @@ pub fn score_fit(
         min_flexion_deg: min_flex,
         bent_backwards: backwards,
         true_min_flexion_deg: true_min,
+    })
+}
+
+/// One synthetic scene's keypoint fit scored against its true hands: a row of
+/// `fit-eval.json` (`bitt fit-hands --scene DIR...`).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct SceneFitResult {
+    /// The scene (its folder, as given).
+    pub scene: String,
+    /// The fit's scores against the true hands.
+    pub scores: FitScores,
+    /// Mean keypoint residual of the hands (pixels).
+    pub residual_px: f64,
+    /// Seconds the fit took.
+    pub seconds: f64,
+    /// Keypoints dropped from the true ones.
+    pub dropped: usize,
+    /// The fit's notes.
+    pub notes: Vec<String>,
+    /// Per hand, what the fit did.
+    pub hands: Vec<super::HandFitReport>,
+}
+
+/// How the synthetic keypoints of [`fit_synthetic_scene`] are made and seen.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct SyntheticFitSettings {
+    /// Gaussian noise (pixels) added to each keypoint coordinate.
+    pub noise_px: f64,
+    /// Fraction of the 42 keypoints dropped.
+    pub drop: f64,
+    /// Seed of the noise and of the dropped points.
+    pub seed: u64,
+    /// Fit with the default intrinsics (focal = image diagonal, centred) instead of the
+    /// scene's true ones.
+    pub default_intrinsics: bool,
+}
+
+/// Fits `scene`'s training view from its noisy true keypoints ([`synthetic_keypoints`]) and
+/// scores the fit against the true hands; `name` names the scene in the result.
+///
+/// # Errors
+/// Invalid settings, a camera that cannot be made, a fit or score that fails.
+pub fn fit_synthetic_scene(
+    scene: &SynthScene,
+    name: String,
+    settings: &SyntheticFitSettings,
+    config: &super::FitConfig,
+    device: &burn::tensor::Device,
+    observer: &mut dyn super::FitObserver,
+) -> Result<SceneFitResult, BittError> {
+    let kp = synthetic_keypoints(scene, settings.noise_px, settings.drop, settings.seed)?;
+    let truth = scene.train.hands.camera;
+    let camera = if settings.default_intrinsics {
+        PinholeCamera {
+            intrinsics: PinholeCamera::default_for_image(truth.width, truth.height)?.intrinsics,
+            ..truth
+        }
+    } else {
+        truth
+    };
+    let models = procedural_pair();
+    let fit = super::fit_keypoints(&models, &kp.keypoints, &camera, config, device, observer)?;
+    let scores = score_fit(&fit, scene, &camera)?;
+    let residual = fit
+        .report
+        .hands
+        .iter()
+        .map(|h| h.mean_residual_px)
+        .sum::<f64>()
+        / fit.report.hands.len().max(1) as f64;
+    Ok(SceneFitResult {
+        scene: name,
+        scores,
+        residual_px: residual,
+        seconds: fit.report.seconds,
+        dropped: kp.dropped,
+        notes: fit.report.notes,
+        hands: fit.report.hands,
+    })
+}
+
+/// `fit-eval.json`: the settings, the means and extremes over the scenes, the configuration
+/// and every scene's result.
+pub fn fit_eval_summary(
+    results: &[SceneFitResult],
+    settings: &SyntheticFitSettings,
+    config: &super::FitConfig,
+) -> serde_json::Value {
+    let n = results.len() as f64;
+    let mean = |f: &dyn Fn(&SceneFitResult) -> f64| results.iter().map(f).sum::<f64>() / n;
+    serde_json::json!({
+        "scenes": results.len(),
+        "noise_px": settings.noise_px,
+        "drop": settings.drop,
+        "seed": settings.seed,
+        "intrinsics": if settings.default_intrinsics { "default" } else { "true" },
+        "mean_joint_2d_px": mean(&|r| r.scores.joint_2d_px),
+        "mean_joint_3d_mm": mean(&|r| r.scores.joint_3d_mm),
+        "max_joint_3d_mm": results.iter().map(|r| r.scores.max_joint_3d_mm).fold(0.0, f64::max),
+        "bent_backwards": results.iter().map(|r| r.scores.bent_backwards).sum::<usize>(),
+        "min_flexion_deg": results.iter().map(|r| r.scores.min_flexion_deg).fold(f64::INFINITY, f64::min),
+        "mean_seconds": mean(&|r| r.seconds),
+        "max_seconds": results.iter().map(|r| r.seconds).fold(0.0, f64::max),
+        "config": config,
+        "per_scene": results,
     })
 }

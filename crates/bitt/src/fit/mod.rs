@@ -41,7 +41,10 @@ use crate::hand_layer::{HandLayer, HandLayerParams, host_params};
 use crate::hand_priors::{FLEXION_RANGE, HandPriors, flexion_angles, flexion_axes};
 use crate::optim::Adam;
 
-pub use eval::{FitScores, SyntheticKeypoints, score_fit, synthetic_keypoints};
+pub use eval::{
+    FitScores, SceneFitResult, SyntheticFitSettings, SyntheticKeypoints, fit_eval_summary,
+    fit_synthetic_scene, record_synthetic_fit, score_fit, synthetic_keypoints,
+};
 pub use jobs::{
     FIT_JSON, KeypointSource, PhotoFit, UNMIRRORED_IMAGE, check_fit_out, fit_photo,
     keypoint_overlay, parse_intrinsics, write_fit_outputs,

@@ -80,7 +80,7 @@ pub use pose::{
 };
 pub use prior::{
     HandSource, PriorSource, adapt_config_to_prior, attach_html_uvs, check_sources,
-    left_uv_from_right, load_html_prior, load_models, texture_model,
+    left_uv_from_right, load_html_prior, load_models, sources, texture_model,
 };
 pub use record::{INPUT_FORMAT, RealInput, RealSource, ViewRecord, files};
 pub use score::{RealScores, hand_masks, score_real};

@@ -6,7 +6,6 @@ use bitt_mesh::glam::DVec3;
 use bitt_mesh::{HandPair, Side, TwoHandScene};
 use bitt_synth::PoseFamily;
 
-use super::BITT_CROP_SIZE;
 use crate::BittError;
 use crate::input::{fit_camera, hands_box, reference_crop_box};
 
@@ -18,12 +17,7 @@ pub fn annotation_pose(
     models: &HandPair,
     size: usize,
 ) -> Result<TwoHandScene, BittError> {
-    let image_size = ["jpg", "jpeg", "png"]
-        .iter()
-        .map(|ext| path.with_extension(ext))
-        .find(|p| p.is_file())
-        .and_then(|p| image::image_dimensions(p).ok())
-        .unwrap_or((BITT_CROP_SIZE, BITT_CROP_SIZE));
+    let image_size = bitt_mesh::annotation::annotation_image_size(path);
     let hands = bitt_mesh::load_bitt_annotation(path, image_size)?;
     for side in Side::BOTH {
         if hands.hand(side).is_none() {
@@ -106,12 +100,7 @@ pub fn orbit_hands(
     if yaw == 0.0 && pitch == 0.0 {
         return Ok(hands.clone());
     }
-    let posed = hands.pose_in_camera(models)?;
-    let all: Vec<DVec3> = [posed.left, posed.right]
-        .into_iter()
-        .flatten()
-        .flat_map(|h| h.vertices)
-        .collect();
+    let all = hands.camera_vertices(models)?;
     let center = all.iter().copied().sum::<DVec3>() / all.len().max(1) as f64;
     Ok(TwoHandScene {
         camera: crate::run::orbit_camera(&hands.camera, center, yaw, pitch),

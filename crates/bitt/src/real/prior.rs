@@ -58,6 +58,24 @@ impl PriorSource {
     }
 }
 
+/// The hand models and texture prior of a MANO folder and an HTML folder (the procedural
+/// hands and PCA without them).
+pub fn sources(model_dir: Option<&Path>, html_dir: Option<&Path>) -> (HandSource, PriorSource) {
+    let hands = match model_dir {
+        Some(dir) => HandSource::Mano {
+            dir: dir.to_path_buf(),
+        },
+        None => HandSource::Procedural,
+    };
+    let prior = match html_dir {
+        Some(dir) => PriorSource::Html {
+            dir: dir.to_path_buf(),
+        },
+        None => PriorSource::Procedural,
+    };
+    (hands, prior)
+}
+
 /// Checks that hands and prior go together (HTML needs MANO's faces; MANO needs HTML's UVs).
 pub fn check_sources(hands: &HandSource, prior: &PriorSource) -> Result<(), BittError> {
     match (hands, prior) {

@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use bitt_mesh::{PinholeCamera, TwoHandScene};
+use bitt_mesh::{PinholeCamera, TwoHandScene, st};
 use burn::tensor::Device;
 
 use super::{HandSource, PriorSource, RealScene, RealView, load_models, real_trainer};
@@ -167,14 +167,13 @@ impl RealInput {
         }
         let mut input = input;
         let path = dir.join(files::IMAGES);
-        let bytes = std::fs::read(&path).map_err(|e| BittError::io(&path, e))?;
-        let st = safetensors::SafeTensors::deserialize(&bytes)
-            .map_err(|e| BittError::corrupt(&path, format!("not a safetensors file: {e}")))?;
+        let bytes = st::read_file(&path)?;
+        let r = st::Reader::open(&bytes, &path)?;
         for view in std::iter::once(&mut input.train)
             .chain(&mut input.novel_views)
             .chain(&mut input.novel_poses)
         {
-            restore_exact_floats(&st, &path, &view.name, &mut view.hands)?;
+            restore_exact_floats(&r, &view.name, &mut view.hands)?;
         }
         Ok(input)
     }
@@ -262,31 +261,22 @@ fn float_slots(scene: &mut TwoHandScene) -> Vec<&mut f64> {
 }
 
 fn write_image_safetensors(path: &Path, views: &[&RealView], size: usize) -> Result<(), BittError> {
-    let mut bytes: Vec<(String, safetensors::Dtype, Vec<usize>, Vec<u8>)> = Vec::new();
+    let mut entries: Vec<st::Entry> = Vec::new();
     for v in views {
-        bytes.push((
+        entries.push((
             v.name.clone(),
             safetensors::Dtype::F32,
             vec![3, size, size],
-            v.image.iter().flat_map(|x| x.to_le_bytes()).collect(),
+            st::f32_bytes(&v.image),
         ));
         let mut hands = v.hands.clone();
-        let floats: Vec<u8> = float_slots(&mut hands)
-            .into_iter()
-            .flat_map(|x| x.to_le_bytes())
-            .collect();
-        bytes.push((
+        let floats = st::f64_bytes(float_slots(&mut hands).into_iter().map(|x| *x));
+        entries.push((
             format!("hands.{}", v.name),
             safetensors::Dtype::F64,
             vec![floats.len() / 8],
             floats,
         ));
-    }
-    let mut tensors = Vec::new();
-    for (name, dtype, shape, b) in &bytes {
-        let view = safetensors::tensor::TensorView::new(*dtype, shape.clone(), b)
-            .map_err(|e| BittError::corrupt(path, format!("cannot encode `{name}`: {e}")))?;
-        tensors.push((name.clone(), view));
     }
     let meta = std::collections::HashMap::from([(
         "format".to_string(),
@@ -294,45 +284,20 @@ fn write_image_safetensors(path: &Path, views: &[&RealView], size: usize) -> Res
          the exact f64 values of input.json's hands and camera"
             .to_string(),
     )]);
-    let data = safetensors::serialize(tensors, Some(meta))
-        .map_err(|e| BittError::corrupt(path, format!("cannot encode: {e}")))?;
-    bitt_mesh::export::write_atomically(path, &data)?;
-    Ok(())
+    Ok(st::write(path, &entries, meta)?)
 }
 
 /// Puts the exact floats stored for view `name` into `hands`.
 fn restore_exact_floats(
-    st: &safetensors::SafeTensors,
-    path: &Path,
+    r: &st::Reader<'_>,
     name: &str,
     hands: &mut TwoHandScene,
 ) -> Result<(), BittError> {
     let key = format!("hands.{name}");
-    let t = st
-        .tensor(&key)
-        .map_err(|_| BittError::corrupt(path, format!("`{key}` is missing")))?;
-    let values: Vec<f64> = t
-        .data()
-        .chunks_exact(8)
-        .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
-        .collect();
     let slots = float_slots(hands);
-    if t.dtype() != safetensors::Dtype::F64 || values.len() != slots.len() {
-        return Err(BittError::corrupt(
-            path,
-            format!(
-                "`{key}` is {:?} with {} values; input.json's view `{name}` has {}",
-                t.dtype(),
-                values.len(),
-                slots.len()
-            ),
-        ));
-    }
+    let (_, values) = r.values::<f64>(&key, &[Some(slots.len())])?;
     if values.iter().any(|x| !x.is_finite()) {
-        return Err(BittError::corrupt(
-            path,
-            format!("`{key}` holds non-finite values"),
-        ));
+        return Err(r.err(format!("`{key}` holds non-finite values")).into());
     }
     for (slot, v) in slots.into_iter().zip(values) {
         *slot = v;
@@ -346,31 +311,7 @@ fn read_image_tensor(
     name: &str,
     size: usize,
 ) -> Result<Vec<f32>, BittError> {
-    let st = safetensors::SafeTensors::deserialize(bytes)
-        .map_err(|e| BittError::corrupt(path, format!("not a safetensors file: {e}")))?;
-    let t = st
-        .tensor(name)
-        .map_err(|_| BittError::corrupt(path, format!("image `{name}` is missing")))?;
-    if t.dtype() != safetensors::Dtype::F32 || t.shape() != [3, size, size] {
-        return Err(BittError::corrupt(
-            path,
-            format!(
-                "image `{name}` is {:?} {:?}; the run's preset needs F32 [3, {size}, {size}]",
-                t.dtype(),
-                t.shape()
-            ),
-        ));
-    }
-    let v: Vec<f32> = t
-        .data()
-        .chunks_exact(4)
-        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-        .collect();
-    if v.iter().any(|x| !x.is_finite()) {
-        return Err(BittError::corrupt(
-            path,
-            format!("image `{name}` holds non-finite values"),
-        ));
-    }
+    let r = st::Reader::open(bytes, path)?;
+    let (_, v) = r.finite_f32s(name, Some(&[Some(3), Some(size), Some(size)]))?;
     Ok(v)
 }

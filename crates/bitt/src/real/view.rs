@@ -143,7 +143,7 @@ pub fn prepare_view(
     })
 }
 
-/// An [`BittError::Io`] naming `image` when it is not a file (before anything is read).
+/// A [`BittError::File`] I/O error naming `image` when it is not a file (before anything is read).
 ///
 /// # Errors
 /// The missing input image.

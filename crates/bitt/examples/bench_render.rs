@@ -1,6 +1,9 @@
-//! `bitt bench-render`: per-stage forward and backward timings of the renderer on two
-//! procedural hands (the demo scene), printed as one JSON line (`cargo xtask bench render`
-//! runs it per device and prints the table).
+//! The renderer benchmark: per-stage forward and backward timings of the renderer on two
+//! procedural hands (the demo scene), printed as one JSON line. `cargo xtask bench render`
+//! runs it per device and prints the table:
+//!
+//! `target/release/examples/bench_render [--device flex|ndarray|wgpu] [--runs N] [--size N]
+//! [--texture-size N]` (built by `cargo build --release --workspace --all-targets`).
 //!
 //! Each stage is timed on its own, with the inputs of earlier stages prepared (and
 //! synchronised) outside the timing:
@@ -15,7 +18,7 @@
 
 use std::time::Instant;
 
-use anyhow::{Context, Result, anyhow};
+use anyhow::{Context, Result, anyhow, bail};
 use bitt_mesh::{PinholeCamera, Side, procedural_pair};
 use bitt_render::ops::{Raster, Topology};
 use bitt_render::scene::{
@@ -26,23 +29,62 @@ use bitt_render::{antialias, interpolate, rasterize, texture};
 use bitt_texture::TextureLayout;
 use burn::tensor::{Device, Distribution, Tensor, TensorData};
 
-use crate::device::DeviceName;
-
-/// Arguments of `bitt bench-render`.
-#[derive(Debug, clap::Args)]
-pub struct BenchRenderArgs {
-    /// Device to time.
-    #[arg(long, default_value = "flex")]
-    pub device: DeviceName,
+/// The benchmark's options.
+#[derive(Debug)]
+struct BenchRenderArgs {
+    /// Device to time (`flex`, `ndarray` or `wgpu`).
+    device: String,
     /// Timed repetitions per measurement (after one warm-up).
-    #[arg(long, default_value_t = 5)]
-    pub runs: usize,
+    runs: usize,
     /// Image side in pixels.
-    #[arg(long, default_value_t = 256)]
-    pub size: usize,
+    size: usize,
     /// Texture side in texels (also the unwrap layout's side).
-    #[arg(long, default_value_t = 1024)]
-    pub texture_size: usize,
+    texture_size: usize,
+}
+
+impl BenchRenderArgs {
+    /// Parses the command line (defaults: flex, 5 runs, 256 px, 1024 texels).
+    fn parse(args: impl IntoIterator<Item = String>) -> Result<Self> {
+        let mut out = BenchRenderArgs {
+            device: "flex".into(),
+            runs: 5,
+            size: 256,
+            texture_size: 1024,
+        };
+        let mut args = args.into_iter();
+        while let Some(flag) = args.next() {
+            let value = args
+                .next()
+                .with_context(|| format!("{flag} takes a value"))?;
+            let number = || {
+                value
+                    .parse::<usize>()
+                    .with_context(|| format!("{flag} takes a number"))
+            };
+            match flag.as_str() {
+                "--device" => out.device = value.clone(),
+                "--runs" => out.runs = number()?,
+                "--size" => out.size = number()?,
+                "--texture-size" => out.texture_size = number()?,
+                _ => bail!(
+                    "usage: bench_render [--device flex|ndarray|wgpu] [--runs N] [--size N] \
+                     [--texture-size N]"
+                ),
+            }
+        }
+        Ok(out)
+    }
+
+    /// The device named by `--device`.
+    #[allow(deprecated)] // burn-ndarray is deprecated upstream but still supported here
+    fn device(&self) -> Result<Device> {
+        Ok(match self.device.as_str() {
+            "flex" => Device::flex(),
+            "ndarray" => Device::ndarray(),
+            "wgpu" => bitt_testkit::wgpu().context("no wgpu adapter")?,
+            other => bail!("--device {other}: expected flex, ndarray or wgpu"),
+        })
+    }
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -111,14 +153,14 @@ struct Stage {
     backward: f64,
 }
 
-/// `bitt bench-render`.
-pub fn run(args: &BenchRenderArgs) -> Result<()> {
+fn main() -> Result<()> {
+    let args = &BenchRenderArgs::parse(std::env::args().skip(1))?;
     anyhow::ensure!(args.runs >= 1, "--runs must be at least 1");
     anyhow::ensure!(
         (16..=2048).contains(&args.size) && (16..=4096).contains(&args.texture_size),
         "--size must be 16 to 2048 and --texture-size 16 to 4096"
     );
-    let device = args.device.device()?.autodiff();
+    let device = args.device()?.autodiff();
     let runs = args.runs;
     let (h, w) = (args.size, args.size);
 
@@ -434,6 +476,78 @@ pub fn run(args: &BenchRenderArgs) -> Result<()> {
             Ok(())
         },
     )?;
+    // Host round trips (`bitt_render::host_readbacks`) of one forward call of each way to
+    // rasterize, and the dense op's time: `rasterize` reads the clip positions back for the
+    // CPU core; `rasterize_dense` is the CubeCL kernel on wgpu (0) and that core elsewhere.
+    let count = |f: &dyn Fn() -> Result<()>| -> Result<u64> {
+        let before = bitt_render::host_readbacks();
+        f()?;
+        Ok(bitt_render::host_readbacks() - before)
+    };
+    let readbacks_sparse = count(&|| {
+        rasterize(clip_host.clone(), &topology, h, w)?;
+        Ok(())
+    })?;
+    let dense = |c: Tensor<2>| -> Result<()> {
+        let d = bitt_render::rasterize_dense(c, &topology, h, w)?;
+        sync(d.depth.clamp_max(1.0))?;
+        Ok(())
+    };
+    let readbacks_dense = count(&|| dense(clip_host.clone()))?;
+    let probe = bitt_render::rasterize_dense(clip_host.clone(), &topology, h, w)?;
+    let dense_kernel = match probe.host_reason {
+        None => format!("{:?}", probe.kernel),
+        Some(why) => format!("{:?} ({why})", probe.kernel),
+    };
+    let dense_forward = measure(runs, || Ok(clip_host.clone()), dense)?;
+    // The dense op's face ids against the CPU core's at the benchmark's size.
+    let core = bitt_render::cpu::rasterize(&host_clip, &faces, w, h)?;
+    let dense_faces: Vec<i32> = probe
+        .face
+        .into_data()
+        .convert::<i32>()
+        .try_to_vec()
+        .map_err(|e| anyhow!("reading face ids: {e:?}"))?;
+    let dense_mismatches = core
+        .face
+        .iter()
+        .zip(&dense_faces)
+        .filter(|(a, b)| a != b)
+        .count();
+    // A training step renders a fixed view: `SceneGeometry::new` once per view and scene
+    // (it rasterizes), then `shade` every step.
+    let scene_mesh = bitt_render::scene::TexturedMesh::new(
+        faces.clone(),
+        verts.len(),
+        uv_faces.clone(),
+        uvs.clone(),
+    )?;
+    let render_scene = bitt_render::scene::Scene::new(&[&scene_mesh])?;
+    let settings = bitt_render::scene::RenderSettings::default();
+    let geometry = std::cell::RefCell::new(None);
+    let readbacks_geometry = count(&|| {
+        let g = bitt_render::scene::SceneGeometry::new(
+            &render_scene,
+            std::slice::from_ref(&verts_host),
+            &camera,
+            &settings,
+            &[[tex_side, tex_side]],
+        )?;
+        *geometry.borrow_mut() = Some(g);
+        Ok(())
+    })?;
+    let point_light = PointLight::from_tensor(light_t.clone())?;
+    let readbacks_shade = count(&|| {
+        let g = geometry.borrow();
+        let g = g.as_ref().context("no scene geometry")?;
+        sync(g.shade(
+            std::slice::from_ref(&tex),
+            &point_light,
+            &material,
+            [0.0; 3],
+        )?)?;
+        Ok(())
+    })?;
     let rasterize_forward = stages[0].forward;
     let out = serde_json::json!({
         "device": args.device,
@@ -449,6 +563,17 @@ pub fn run(args: &BenchRenderArgs) -> Result<()> {
             "cpu_core": cpu_core,
             "clip_readback": readback,
             "overhead": rasterize_forward - cpu_core,
+        },
+        "rasterize_dense": {
+            "kernel": dense_kernel,
+            "forward": dense_forward,
+            "face_ids_differing_from_cpu_core": dense_mismatches,
+        },
+        "host_readbacks": {
+            "rasterize": readbacks_sparse,
+            "rasterize_dense": readbacks_dense,
+            "scene_geometry_new": readbacks_geometry,
+            "shade_step": readbacks_shade,
         },
     });
     println!("{out}");
