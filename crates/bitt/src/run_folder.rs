@@ -128,7 +128,8 @@ pub fn fresh_out(
                 .collect();
             if !clash.is_empty() {
                 return Err(BittError::Invalid(format!(
-                    "{}: --force never overwrites files it did not write, and the folder holds {}                      (names a run writes); choose another --out",
+                    "{}: --force never overwrites files it did not write, and the folder holds {} \
+                     (names a run writes); choose another --out",
                     out.display(),
                     clash.join(", ")
                 )));
@@ -334,6 +335,10 @@ mod tests {
         assert!(
             err.contains("never overwrites") && err.contains("config.json"),
             "{err}"
+        );
+        assert!(
+            err.contains("holds config.json (names a run writes)"),
+            "one message, no run of spaces: {err}"
         );
         let own_default = dir.join("fresh-default");
         std::fs::create_dir_all(&own_default).unwrap();
