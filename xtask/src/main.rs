@@ -25,11 +25,16 @@
 //! - `check-clients [--run DIR] [--iterations N] [--screenshot PNG] [--chromium PATH]`: a run's
 //!   outputs opened headless in the programs people view them with (Chromium: the report's 3D
 //!   view); not part of CI; see `docs/clients.md`.
+//! - `gpu-bundle`: the stripped, gzipped release `bitt`, the Vulkan loader and `run.sh` in
+//!   `gpu-bundle/` (under 64 MiB, for GPU machines without network); `gpu-check
+//!   [--reuse-bundle] [ARGS]`: that bundle's `bitt gpu-check` run here (`gpu_bundle.rs`,
+//!   `docs/gpu-check.md`).
 
 mod bench;
 mod bench_render;
 mod check_clients;
 mod fuzz;
+mod gpu_bundle;
 mod nets;
 mod scripts;
 mod slurm;
@@ -407,7 +412,7 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some((cmd, rest)) = args.split_first() else {
         bail!(
-            "usage: cargo xtask <demo|test|e2e|train-scene|render-avatar|export|eval|eval-merge|metrics|convert-lpips|pose-hands|convert-mano|texture|convert-html|render|synth|fuzz|bench|check-clients|docs-images|mesh-noise-calibration|fuzz-seeds> [ARGS]"
+            "usage: cargo xtask <demo|test|e2e|train-scene|render-avatar|export|eval|eval-merge|metrics|convert-lpips|pose-hands|convert-mano|texture|convert-html|render|synth|fuzz|bench|gpu-bundle|gpu-check|check-clients|docs-images|mesh-noise-calibration|fuzz-seeds> [ARGS]"
         );
     };
     match cmd.as_str() {
@@ -431,6 +436,8 @@ fn main() -> Result<()> {
         }
         "e2e" => e2e(),
         "fuzz" => fuzz::fuzz(rest),
+        "gpu-bundle" => gpu_bundle::gpu_bundle().map(|_| ()),
+        "gpu-check" => gpu_bundle::gpu_check(rest),
         "nets" => nets::nets(rest),
         "bench" => bench::bench(rest),
         "slurm-check" => slurm::slurm_check(rest),

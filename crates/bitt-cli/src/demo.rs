@@ -8,7 +8,7 @@ use anyhow::Result;
 use bitt::demo::demo_scene;
 use bitt_mesh::procedural_pair;
 
-use crate::pose_hands::{report_boxes, write_hands};
+use crate::pose_hands::report_boxes;
 
 /// Arguments of `bitt demo`.
 #[derive(Debug, clap::Args)]
@@ -26,7 +26,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     std::fs::create_dir_all(&args.out)?;
     let obj = args.out.join("hands.obj");
     let glb = args.out.join("hands.glb");
-    write_hands(&models, &posed, &obj, Some(&glb))?;
+    posed.write(&models, &obj, Some(&glb))?;
     bitt_mesh::export::write_atomically(
         &args.out.join("scene.json"),
         serde_json::to_string_pretty(&scene)?.as_bytes(),

@@ -2,6 +2,7 @@
 
 use std::sync::OnceLock;
 
+use bitt::gpu_check::{AdapterInfo, AdapterKind};
 use burn::tensor::{Device, DeviceKind};
 
 /// The backends this binary is built with.
@@ -32,12 +33,17 @@ impl DeviceName {
 }
 
 /// The wgpu device, set up once per process, its adapter named on stderr.
+fn wgpu() -> anyhow::Result<Device> {
+    wgpu_with_adapter().map(|(device, _)| device)
+}
+
+/// The wgpu device and its adapter, set up once per process, the adapter named on stderr.
 ///
 /// Off macOS the graphics API is pinned to Vulkan (a GPU's driver, or Mesa's lavapipe):
 /// `Auto` would go on to set up OpenGL (EGL) and others when Vulkan has only a software
 /// adapter. Where Vulkan has no adapter at all, `Auto` chooses.
-fn wgpu() -> anyhow::Result<Device> {
-    static WGPU: OnceLock<Result<Device, String>> = OnceLock::new();
+pub fn wgpu_with_adapter() -> anyhow::Result<(Device, AdapterInfo)> {
+    static WGPU: OnceLock<Result<(Device, AdapterInfo), String>> = OnceLock::new();
     WGPU.get_or_init(|| {
         use burn::tensor::wgpu::WgpuBackend;
         let pinned = if cfg!(target_os = "macos") {
@@ -61,10 +67,30 @@ fn wgpu() -> anyhow::Result<Device> {
             "wgpu adapter: {} ({:?}, {:?}, driver {} {})",
             info.name, setup.backend, info.device_type, info.driver, info.driver_info
         );
-        Ok(device)
+        Ok((
+            device,
+            AdapterInfo {
+                name: info.name.clone(),
+                kind: adapter_kind(info.device_type),
+                backend: format!("{:?}", setup.backend),
+                driver: info.driver.clone(),
+                driver_info: info.driver_info.clone(),
+            },
+        ))
     })
     .clone()
     .map_err(|e| anyhow::anyhow!(e))
+}
+
+fn adapter_kind(t: burn::tensor::wgpu::wgpu::DeviceType) -> AdapterKind {
+    use burn::tensor::wgpu::wgpu::DeviceType;
+    match t {
+        DeviceType::DiscreteGpu => AdapterKind::DiscreteGpu,
+        DeviceType::IntegratedGpu => AdapterKind::IntegratedGpu,
+        DeviceType::VirtualGpu => AdapterKind::VirtualGpu,
+        DeviceType::Cpu => AdapterKind::Cpu,
+        DeviceType::Other => AdapterKind::Other,
+    }
 }
 
 #[cfg(feature = "cuda")]

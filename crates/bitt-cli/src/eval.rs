@@ -7,21 +7,17 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use bitt::baselines::BaselineConfig;
 use bitt::benchmark::{
-    EvalPlan, MeshSetting, Method, evaluate_real_scene, evaluate_scene, interhand_scene_id,
-    parse_shard, pending, prepare_folder, result_path, shard_seeds, trainings_per_scene,
-    write_scene,
+    EvalObserver, EvalPlan, EvalRun, InterHandScenes, MeshSetting, Method, evaluate_interhand,
+    evaluate_synthetic, parse_shard, prepare_folder,
 };
-use bitt::real::{interhand_views, load_models, real_trainer, sources};
-use bitt::run::texture_prior_with_progress;
-use bitt::{Observer, Progress, TrainConfig};
-use bitt_mesh::interhand::{InterHandDataset, InterHandSelection};
-use bitt_nets::Preset;
-use bitt_synth::{BENCHMARK_SCENES, MeshNoise, SynthConfig};
+use bitt::lpips::LpipsVgg;
+use bitt::real::sources;
+use bitt::{Observer, Progress};
+use bitt_synth::BENCHMARK_SCENES;
 
+use crate::args::TrainingArgs;
 use crate::device::DeviceName;
 use crate::progress::ProgressLine;
-use crate::train_scene::training_config;
-use bitt::lpips::LpipsVgg;
 
 /// Where the evaluated scenes come from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -69,13 +65,10 @@ pub struct EvalArgs {
     /// Mesh settings: both, gt-mesh or noisy-mesh.
     #[arg(long, default_value = "both")]
     pub mesh: String,
-    /// Named configuration of every BiTT training.
-    #[arg(long, default_value = "quick")]
-    pub preset: Preset,
-    /// A full training configuration (a run's `config.json`, edited) instead of --preset;
-    /// the ablations switch their parts off from it.
-    #[arg(long, conflicts_with = "preset")]
-    pub config: Option<PathBuf>,
+    /// The configuration of every BiTT training (the ablations switch their parts off from
+    /// it).
+    #[command(flatten)]
+    pub training: TrainingArgs,
     /// BiTT iterations (default: the preset's).
     #[arg(long)]
     pub iterations: Option<usize>,
@@ -137,6 +130,24 @@ impl Observer for EvalBar {
     }
 }
 
+impl EvalObserver for EvalBar {
+    fn say(&mut self, line: &str) {
+        eprintln!("{line}");
+    }
+
+    fn plan(&mut self, iterations: usize) {
+        self.total = iterations;
+    }
+
+    fn scene(&mut self, label: String) {
+        self.label = label;
+    }
+
+    fn pca(&mut self) -> Box<dyn bitt_texture::FitProgress> {
+        Box::new(crate::progress::PcaFitBar::new())
+    }
+}
+
 /// `bitt eval`.
 pub fn run(args: &EvalArgs) -> Result<()> {
     let started = Instant::now();
@@ -159,7 +170,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     {
         bail!("--root, --model-dir and --html-dir are for --dataset interhand");
     }
-    let mut config = training_config(args.config.as_deref(), args.preset)?;
+    let mut config = args.training.read()?;
     if let Some(n) = args.iterations {
         config.iterations = n;
     }
@@ -198,192 +209,39 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     if lpips.is_none() {
         eprintln!("no LPIPS weights (see `bitt convert-lpips`): LPIPS is reported as n/a");
     }
-    if args.dataset == Dataset::Interhand {
-        let interhand = InterhandEval {
-            config: &config,
-            baseline: &baseline,
-            methods: &methods,
-            lpips: lpips.as_ref(),
-            shard: (shard, shards),
-        };
-        return run_interhand(args, &interhand, settings, &device, started);
-    }
-    let seeds = shard_seeds(scenes, (shard, shards));
-    let todo = pending(&args.out, &seeds, &settings);
-    let skipped = seeds.len() * settings.len() - todo.len();
-    if skipped > 0 {
-        eprintln!(
-            "{skipped} scene result(s) already in {}: skipped",
-            args.out.display()
-        );
-    }
-    let trainings = trainings_per_scene(&methods, &config);
+    let run = EvalRun {
+        out: &args.out,
+        cache: &args.cache,
+        config: &config,
+        baseline: &baseline,
+        methods: &methods,
+        settings: &settings,
+        lpips: lpips.as_ref(),
+        shard: (shard, shards),
+    };
     let mut bar = EvalBar {
         line: ProgressLine::open_ended(),
         done: 0,
-        total: todo.len() * trainings * config.iterations,
+        total: 0,
         label: String::new(),
     };
-    eprintln!(
-        "evaluating {} scene/setting pair(s), {} method(s), preset {} ({} iterations per BiTT training)",
-        todo.len(),
-        methods.len(),
-        config.preset,
-        config.iterations
-    );
-    let pca = texture_prior_with_progress(
-        &config,
-        Some(&args.cache),
-        &host,
-        &crate::progress::PcaFitBar::new(),
-    )?;
-    for (k, &(seed, setting)) in todo.iter().enumerate() {
-        let synth = SynthConfig {
-            size: config.nets.image_size as u32,
-            texture_size: config.texture.resolution,
-            mesh_noise: (setting == MeshSetting::NoisyMesh).then(MeshNoise::default),
-            ..SynthConfig::default()
-        };
-        let scene = bitt_synth::cached_scene(&synth, seed, &args.cache.join("scenes"), &host)
-            .with_context(|| format!("generating scene {seed:#x}"))?;
-        bar.label = format!("[{}/{}] {seed:016x} {}", k + 1, todo.len(), setting.key());
-        let (result, sheets) = evaluate_scene(
-            &scene,
-            setting,
-            &config,
-            &baseline,
-            &pca,
-            &methods,
-            lpips.as_ref(),
-            &device,
-            &mut bar,
-        )
-        .with_context(|| format!("scene {seed:#x} ({})", setting.key()))?;
-        write_scene(
-            &args.out,
-            &result,
-            &scene.train.image,
-            &sheets,
-            config.nets.image_size,
-        )?;
-    }
-    eprintln!();
-    finish(&args.out, started)
-}
-
-/// What an InterHand2.6M evaluation shares with a synthetic one.
-struct InterhandEval<'a> {
-    config: &'a TrainConfig,
-    baseline: &'a BaselineConfig,
-    methods: &'a [Method],
-    lpips: Option<&'a LpipsVgg>,
-    shard: (usize, usize),
-}
-
-/// `bitt eval --dataset interhand`: one scene per capture, annotated meshes.
-fn run_interhand(
-    args: &EvalArgs,
-    e: &InterhandEval<'_>,
-    settings: Vec<MeshSetting>,
-    device: &burn::tensor::Device,
-    started: Instant,
-) -> Result<()> {
-    let root = args
-        .root
-        .as_ref()
-        .context("--dataset interhand needs --root (the InterHand2.6M folder)")?;
-    if !settings.contains(&MeshSetting::GtMesh) {
-        bail!(
-            "--dataset interhand evaluates with the annotated meshes only (Table 1a); the \
-             setting without them needs a mesh estimator such as IntagHand"
-        );
-    }
-    let (hands, prior) = sources(args.model_dir.as_deref(), args.html_dir.as_deref());
-    let models = load_models(&hands, &prior)?;
-    eprintln!(
-        "reading InterHand2.6M {} annotations below {}",
-        args.split,
-        root.display()
-    );
-    let dataset = InterHandDataset::open(root, &args.split)?;
-    eprintln!("InterHand2.6M {}: {}", args.split, dataset.counts);
-    let captures = dataset.captures();
-    let wanted = match args.scenes.as_str() {
-        "all" => captures.len(),
-        n => n.parse::<usize>().unwrap_or(1),
-    };
-    let (shard, shards) = e.shard;
-    let size = e.config.nets.image_size;
-    let trainings = trainings_per_scene(e.methods, e.config);
-    let mut bar = EvalBar {
-        line: ProgressLine::open_ended(),
-        done: 0,
-        total: wanted.min(captures.len()).div_ceil(shards) * trainings * e.config.iterations,
-        label: String::new(),
-    };
-    let mut taken = 0;
-    for capture in captures {
-        if taken == wanted {
-            break;
+    match args.dataset {
+        Dataset::Synthetic => evaluate_synthetic(&run, scenes, &device, &mut bar)?,
+        Dataset::Interhand => {
+            let root = args
+                .root
+                .as_ref()
+                .context("--dataset interhand needs --root (the InterHand2.6M folder)")?;
+            let (hands, prior) = sources(args.model_dir.as_deref(), args.html_dir.as_deref());
+            let data = InterHandScenes {
+                root,
+                split: &args.split,
+                hands,
+                prior,
+                scenes: (args.scenes != "all").then_some(scenes),
+            };
+            evaluate_interhand(&run, &data, &device, &mut bar)?;
         }
-        let selection = InterHandSelection {
-            capture: Some(capture),
-            ..InterHandSelection::default()
-        };
-        let scene = match dataset.select(&selection) {
-            Ok(s) => s,
-            Err(err) => {
-                eprintln!("capture {capture}: no usable scene ({err}); skipped");
-                continue;
-            }
-        };
-        let k = taken;
-        taken += 1;
-        if k % shards != shard {
-            continue;
-        }
-        let id = interhand_scene_id(
-            &args.split,
-            capture,
-            scene.train.entry.frame_idx,
-            &scene.train.entry.camera,
-        );
-        let path = result_path(&args.out, MeshSetting::GtMesh, id);
-        if path.is_file() {
-            eprintln!(
-                "capture {capture}: result exists ({}); skipped",
-                path.display()
-            );
-            continue;
-        }
-        let views = interhand_views(&scene, &models, size)
-            .with_context(|| format!("capture {capture}: preparing its views"))?;
-        bar.label = format!(
-            "[{}] capture {capture} frame {} cam {}",
-            k + 1,
-            scene.train.entry.frame_idx,
-            scene.train.entry.camera
-        );
-        let make = |cfg: &TrainConfig| {
-            real_trainer(
-                &views.train.image,
-                &views.train.hands,
-                models.clone(),
-                &prior,
-                cfg.clone(),
-                Some(&args.cache),
-                device,
-            )
-        };
-        let (result, sheets) = evaluate_real_scene(
-            &views, id, &make, e.config, e.baseline, e.methods, e.lpips, device, &mut bar,
-        )
-        .with_context(|| format!("InterHand2.6M capture {capture}"))?;
-        write_scene(&args.out, &result, &views.train.image, &sheets, size)?;
-    }
-    eprintln!();
-    if taken == 0 {
-        bail!("no capture under {} has a usable scene", root.display());
     }
     finish(&args.out, started)
 }

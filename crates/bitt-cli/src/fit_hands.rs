@@ -2,101 +2,19 @@
 //! JSON); writes `hands.json`, `fit.json` and `overlay.png`. With `--scene`, the same fit on
 //! synthetic scenes from their noisy true keypoints, scored against the true hands.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
+use bitt::config_files::{refine_config, training_config};
 use bitt::fit::{
-    FitConfig, FitObserver, FitProgress, KeypointSource, SyntheticFitSettings, check_fit_out,
-    fit_eval_summary, fit_photo, fit_synthetic_scene, parse_intrinsics, write_fit_outputs,
+    FitConfig, SyntheticFitSettings, check_fit_out, fit_eval_summary, fit_photo,
+    fit_synthetic_scenes, write_fit_eval, write_fit_outputs,
 };
-use bitt_mesh::keypoints::KeypointFormat;
 use bitt_nets::Preset;
-use bitt_synth::SynthScene;
 
+use crate::args::{HandsArgs, KeypointArgs};
 use crate::device::DeviceName;
-use crate::progress::ProgressLine;
-use crate::refine_hands::{RefineBar, refine_config};
-use crate::train_scene::{HandsArgs, training_config};
-
-/// Keypoint file formats.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum FormatArg {
-    /// OpenPose `--write_json` (`people[0].hand_left/right_keypoints_2d`).
-    Openpose,
-    /// MediaPipe HandLandmarker results saved as JSON (Python or JS field names).
-    Mediapipe,
-    /// `{"left": [[x, y, c], ...], "right": [...]}` in OpenPose order, pixels.
-    Plain,
-}
-
-impl From<FormatArg> for KeypointFormat {
-    fn from(f: FormatArg) -> Self {
-        match f {
-            FormatArg::Openpose => KeypointFormat::OpenPose,
-            FormatArg::Mediapipe => KeypointFormat::MediaPipe,
-            FormatArg::Plain => KeypointFormat::Plain,
-        }
-    }
-}
-
-/// The keypoint options shared with `train-scene`.
-#[derive(Debug, Clone, clap::Args)]
-pub struct KeypointArgs {
-    /// The keypoint file's format (default: guessed from its content).
-    #[arg(long, value_enum, requires = "keypoints")]
-    pub format: Option<FormatArg>,
-    /// The photo is a mirrored selfie (as a front camera shows it): photo, keypoints and mask
-    /// are flipped left-right before the fit, so each hand gets its own side's model.
-    /// Default: an ordinary photo. (MediaPipe names hands as if every image were mirrored;
-    /// its labels are read accordingly either way.)
-    #[arg(long, requires = "keypoints")]
-    pub mirrored: bool,
-    /// Camera intrinsics `fx,fy,cx,cy` in pixels of the photo. Default: focal length = the
-    /// image diagonal, principal point at the centre.
-    #[arg(long, requires = "keypoints")]
-    pub intrinsics: Option<String>,
-    /// A keypoint-fit configuration (JSON, the `report.config` of a `fit.json`, edited).
-    #[arg(long)]
-    pub fit_config: Option<PathBuf>,
-}
-
-impl KeypointArgs {
-    /// The source of keypoint file `path`.
-    pub fn source(&self, path: &Path) -> KeypointSource {
-        KeypointSource {
-            path: path.to_path_buf(),
-            format: self.format.map(Into::into),
-            mirrored: self.mirrored,
-        }
-    }
-
-    /// The intrinsics of `--intrinsics`.
-    pub fn intrinsics(&self) -> Result<Option<[f64; 4]>> {
-        Ok(match &self.intrinsics {
-            Some(t) => Some(parse_intrinsics(t)?),
-            None => None,
-        })
-    }
-
-    /// The fit configuration.
-    pub fn config(&self) -> Result<FitConfig> {
-        let config: FitConfig = match &self.fit_config {
-            Some(path) => {
-                let text = std::fs::read_to_string(path)
-                    .with_context(|| format!("reading {}", path.display()))?;
-                bitt::config::read_config(&text, path, "a keypoint-fit configuration")?
-            }
-            None => FitConfig::default(),
-        };
-        if let Err(e) = config.validate() {
-            match &self.fit_config {
-                Some(path) => bail!("{}: {e}", path.display()),
-                None => return Err(e.into()),
-            }
-        }
-        Ok(config)
-    }
-}
+use crate::progress::{FitBar, RefineBar};
 
 /// Arguments of `bitt fit-hands`.
 #[derive(Debug, clap::Args)]
@@ -153,44 +71,6 @@ pub struct FitHandsArgs {
     pub cache: PathBuf,
 }
 
-/// The keypoint fit's progress line (`crate::progress`; its plan grows with each restart, so
-/// the caller ends the line).
-pub(crate) struct FitBar {
-    line: ProgressLine,
-    quiet: bool,
-}
-
-impl FitBar {
-    pub(crate) fn new() -> Self {
-        FitBar {
-            line: ProgressLine::open_ended(),
-            quiet: false,
-        }
-    }
-
-    fn quiet() -> Self {
-        FitBar {
-            quiet: true,
-            ..Self::new()
-        }
-    }
-}
-
-impl FitObserver for FitBar {
-    fn iteration(&mut self, p: &FitProgress) {
-        if self.quiet {
-            return;
-        }
-        let text = format!(
-            "{:10} loss {:.4} {:.1} s",
-            p.stage,
-            p.loss,
-            self.line.elapsed()
-        );
-        self.line.show("fit ", p.iteration, p.iterations, &text);
-    }
-}
-
 fn run_scenes(args: &FitHandsArgs, config: &FitConfig) -> Result<()> {
     if args.hands.model_dir.is_some() {
         bail!("--scene fits a synthetic scene's procedural hands: drop --model-dir");
@@ -207,19 +87,7 @@ fn run_scenes(args: &FitHandsArgs, config: &FitConfig) -> Result<()> {
         seed: args.seed,
         default_intrinsics: args.default_intrinsics,
     };
-    let mut results = Vec::new();
-    for dir in &args.scene {
-        let scene = SynthScene::read(dir).with_context(|| format!("--scene {}", dir.display()))?;
-        let name = dir.display().to_string();
-        let r = fit_synthetic_scene(
-            &scene,
-            name,
-            &settings,
-            config,
-            &device,
-            &mut FitBar::quiet(),
-        )
-        .with_context(|| format!("fitting --scene {}", dir.display()))?;
+    let results = fit_synthetic_scenes(&args.scene, &settings, config, &device, |dir, r| {
         let scores = &r.scores;
         println!(
             "{}: 2D joints {:.2} px, root-relative 3D {:.1} mm (max {:.1}), min flexion {:.0} deg ({} bent backwards), {:.1} s",
@@ -231,8 +99,7 @@ fn run_scenes(args: &FitHandsArgs, config: &FitConfig) -> Result<()> {
             scores.bent_backwards,
             r.seconds
         );
-        results.push(r);
-    }
+    })?;
     let summary = fit_eval_summary(&results, &settings, config);
     println!(
         "mean over {} scenes: 2D joints {:.2} px, root-relative 3D {:.1} mm, {} joints bent backwards, {:.1} s per fit ({} intrinsics)",
@@ -247,10 +114,7 @@ fn run_scenes(args: &FitHandsArgs, config: &FitConfig) -> Result<()> {
             "true"
         }
     );
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
-    let path = args.out.join("fit-eval.json");
-    bitt::outputs::write_json(&path, &summary)?;
+    let path = write_fit_eval(&args.out, &summary)?;
     println!("wrote {}", path.display());
     Ok(())
 }
@@ -331,9 +195,11 @@ pub fn run(args: &FitHandsArgs) -> Result<()> {
 mod tests {
     use super::*;
     use bitt_mesh::glam::DVec3;
+    use bitt_mesh::keypoints::KeypointFormat;
     use bitt_mesh::keypoints::TwoHandKeypoints;
     use bitt_mesh::{HandParams, HandPose, PinholeCamera, Side};
     use bitt_tests::real_fixture::{scratch, write_image};
+    use std::path::Path;
 
     type Cli = crate::test_args::Parsed<FitHandsArgs>;
 

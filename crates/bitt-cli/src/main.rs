@@ -4,6 +4,7 @@
 //! everything else lives in the library crates (see ARCHITECTURE.md).
 
 mod allocator;
+mod args;
 mod avatar_pose;
 mod backend_check;
 mod demo;
@@ -11,6 +12,7 @@ mod device;
 mod eval;
 mod export;
 mod fit_hands;
+mod gpu_check;
 mod metrics;
 mod nets;
 mod pose_hands;
@@ -118,6 +120,10 @@ enum Command {
         #[arg(long, default_value = "flex")]
         device: device::DeviceName,
     },
+    /// Every GPU check in one run on wgpu (whatever adapter exists) against flex: backend
+    /// check, demo render, dense rasterizer, training time, network benches; one table at the
+    /// end, JSON in --out (`cargo xtask gpu-bundle`, docs/gpu-check.md).
+    GpuCheck(gpu_check::GpuCheckArgs),
 }
 
 /// Mesa's device-selection Vulkan layer (an implicit layer on Linux) connects to a Wayland
@@ -147,6 +153,7 @@ fn main() -> Result<()> {
         Command::Texture(args) => texture::run(&args),
         Command::ConvertHtml { model_dir, out } => texture::convert(&model_dir, &out),
         Command::BackendCheck { device } => backend_check::run(device),
+        Command::GpuCheck(args) => gpu_check::run(&args),
         Command::Render(args) => render::run(&args),
         Command::Synth(args) => synth::run(&args),
         Command::TrainScene(args) => train_scene::run(&args),

@@ -3,13 +3,13 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use bitt::BittError;
 use bitt::lpips::{self, LpipsVgg};
 use bitt::lpips_convert::{self, StateDict};
-use bitt::metrics::{SsimWindow, image_metrics_with, masked_image_metrics};
+use bitt::metrics::SsimWindow;
+use bitt::pair_metrics::{compare_images, pair_report};
 use bitt_pickle::{ArrayData, Value};
-use bitt_texture::load_image;
 use serde_json::json;
 
 use crate::device::DeviceName;
@@ -77,10 +77,6 @@ pub struct ConvertLpipsArgs {
     out: Option<PathBuf>,
 }
 
-fn load_planar(path: &Path, what: &str) -> Result<bitt_texture::PlanarImage> {
-    load_image(path).with_context(|| format!("cannot read {what} {}", path.display()))
-}
-
 /// `bitt metrics`.
 pub fn run(args: &MetricsArgs) -> Result<()> {
     let value = compute(args, lpips::default_weights_path())?;
@@ -91,46 +87,8 @@ pub fn run(args: &MetricsArgs) -> Result<()> {
 /// The JSON of `bitt metrics`; `default_weights` is where LPIPS weights are looked for
 /// without `--lpips`.
 fn compute(args: &MetricsArgs, default_weights: Option<PathBuf>) -> Result<serde_json::Value> {
-    let a = load_planar(&args.a, "image")?;
-    let b = load_planar(&args.b, "image")?;
-    let same_size = |p: &Path, i: &bitt_texture::PlanarImage| -> Result<()> {
-        if (i.width, i.height) != (a.width, a.height) {
-            bail!(
-                "{} is {}x{} but {} is {}x{}; the images must have the same size",
-                p.display(),
-                i.width,
-                i.height,
-                args.a.display(),
-                a.width,
-                a.height
-            );
-        }
-        Ok(())
-    };
-    same_size(&args.b, &b)?;
-    let dims = [3, a.height, a.width];
     let window = SsimWindow::from(args.ssim_window);
-    let hw = a.width * a.height;
-    let (m, mask, lpips_inputs) = match &args.mask {
-        None => (
-            image_metrics_with(&a.data, &b.data, dims, window),
-            None,
-            (a.data.clone(), b.data.clone()),
-        ),
-        Some(p) => {
-            let mi = load_planar(p, "mask")?;
-            same_size(p, &mi)?;
-            let mask: Vec<f32> = (0..hw)
-                .map(|i| (mi.data[i] + mi.data[hw + i] + mi.data[2 * hw + i]) / 3.0)
-                .collect();
-            let m = masked_image_metrics(&a.data, &b.data, &mask, dims, window)
-                .with_context(|| format!("mask {} selects no pixel", p.display()))?;
-            let count = mask.iter().filter(|&&v| v >= 0.5).count();
-            let am = bitt::metrics::apply_mask(&a.data, &mask, dims);
-            let bm = bitt::metrics::apply_mask(&b.data, &mask, dims);
-            (m, Some(count), (am, bm))
-        }
-    };
+    let pair = compare_images(&args.a, &args.b, args.mask.as_deref(), window)?;
     let weights = match &args.lpips {
         Some(p) => Some(p.clone()),
         None => default_weights.clone().filter(|p| p.is_file()),
@@ -149,8 +107,9 @@ fn compute(args: &MetricsArgs, default_weights: Option<PathBuf>) -> Result<serde
         Some(p) => {
             let device = args.device.device()?;
             let net = LpipsVgg::load(p, &device)?;
+            let (a, b) = &pair.lpips_inputs;
             let d = net
-                .distance(&lpips_inputs.0, &lpips_inputs.1, dims, &device)
+                .distance(a, b, pair.dims(), &device)
                 .context("computing LPIPS")?;
             (
                 Some(d),
@@ -161,47 +120,15 @@ fn compute(args: &MetricsArgs, default_weights: Option<PathBuf>) -> Result<serde
             )
         }
     };
-    let finite = |v: f64| v.is_finite().then_some(v);
-    let mut out = json!({
-        "a": args.a.display().to_string(),
-        "b": args.b.display().to_string(),
-        "width": a.width,
-        "height": a.height,
-        "l1": m.l1,
-        "psnr": finite(m.psnr),
-        "ssim": finite(m.ssim),
-        "ms_ssim": m.ms_ssim,
-        "lpips": lpips_value,
-        "lpips_note": lpips_note,
-        "ssim_window": window,
-    });
-    let obj = out.as_object_mut().expect("an object");
-    if m.psnr.is_infinite() {
-        obj.insert(
-            "psnr_note".into(),
-            json!("identical images: PSNR is infinite"),
-        );
-    }
-    if m.ms_ssim.is_none() {
-        obj.insert(
-            "ms_ssim_note".into(),
-            json!(format!(
-                "MS-SSIM needs both sides of at least {} pixels",
-                bitt::metrics::MS_SSIM_MIN_SIDE
-            )),
-        );
-    }
-    if m.ssim.is_nan() {
-        obj.insert(
-            "ssim_note".into(),
-            json!("SSIM needs both sides of at least 11 pixels"),
-        );
-    }
-    if let (Some(p), Some(count)) = (&args.mask, mask) {
-        obj.insert("mask".into(), json!(p.display().to_string()));
-        obj.insert("mask_pixels".into(), json!(count));
-    }
-    Ok(out)
+    Ok(pair_report(
+        &args.a,
+        &args.b,
+        args.mask.as_deref(),
+        &pair,
+        window,
+        lpips_value,
+        &lpips_note,
+    ))
 }
 
 /// The float tensors of a torch checkpoint's state dict (values as `f32`).

@@ -1,13 +1,10 @@
 //! `bitt nets` (parameter counts and output shapes of the four networks) and `bitt
 //! bench-nets` (forward + backward timings of BTR and the albedo U-Net), both as JSON.
 
-use std::time::Instant;
-
-use anyhow::{Context, Result};
-use burn::module::Module;
-use burn::tensor::{Device, Distribution, Tensor};
-
-use bitt_nets::{BittNetsConfig, ConvImpl, LightParams, Preset};
+use anyhow::Result;
+use bitt::net_shapes::net_shapes;
+use bitt::nets_bench::{BenchedNet, bench_net};
+use bitt_nets::{BittNetsConfig, ConvImpl, Preset};
 
 use crate::device::DeviceName;
 
@@ -85,184 +82,41 @@ pub struct BenchNetsArgs {
     conv: ConvChoice,
 }
 
-fn dims<const D: usize>(t: &Tensor<D>) -> Vec<usize> {
-    t.dims().to_vec()
-}
-
 /// `bitt nets`: prints each network's parameter count, input and output shapes as JSON.
 pub fn run(args: &NetsArgs) -> Result<()> {
     let device = args.device.device()?;
     let config = BittNetsConfig::preset(args.preset);
-    let nets = config.init(&device)?;
-    let (s, t) = (config.image_size, config.num_texels);
-    let image_shape = vec![1, 3, s, s];
-    let texel_shape = vec![1, 3, t];
-    let mut out = serde_json::json!({
-        "preset": args.preset,
-        "device": args.device,
-        "image_size": s,
-        "num_texels": t,
-        "networks": {
-            "albedo": { "params": nets.albedo.num_params(), "input": [image_shape] },
-            "light": { "params": nets.light.num_params(), "input": [image_shape] },
-            "html": { "params": nets.html.num_params(), "input": [image_shape] },
-            "btr": {
-                "params": nets.btr.num_params(),
-                "input": [texel_shape, texel_shape],
-                "bidirectional": nets.btr.bidirectional(),
-            },
-        },
-        "config": config,
-    });
-    if !args.no_run {
-        let image = Tensor::<4>::random([1, 3, s, s], Distribution::Default, &device);
-        let n = &mut out["networks"];
-        n["albedo"]["output"] = serde_json::json!([dims(&nets.albedo.forward(image.clone()))]);
-        let raw = nets.light.forward(image.clone());
-        n["light"]["output"] = serde_json::json!([dims(&raw)]);
-        let light = LightParams::from_raw(raw);
-        n["light"]["light_params"] = serde_json::json!({
-            "ambient": dims(&light.ambient),
-            "diffuse": dims(&light.diffuse),
-            "specular": dims(&light.specular),
-            "location": dims(&light.location),
-        });
-        let html = nets.html.predict(image);
-        n["html"]["output"] = serde_json::json!([dims(&html.left), dims(&html.right)]);
-        let x = Tensor::<3>::random([1, 3, t], Distribution::Default, &device);
-        let y = nets.btr.forward(x.clone(), x);
-        n["btr"]["output"] = serde_json::json!([dims(&y.left), dims(&y.right)]);
-    }
+    let mut out = net_shapes(&config, !args.no_run, &device)?;
+    out["preset"] = serde_json::json!(args.preset);
+    out["device"] = serde_json::json!(args.device);
     println!("{}", serde_json::to_string_pretty(&out)?);
     Ok(())
 }
 
-/// One forward + backward; returns the seconds it took.
-fn time_once(f: impl FnOnce() -> Result<()>) -> Result<f64> {
-    let start = Instant::now();
-    f()?;
-    Ok(start.elapsed().as_secs_f64())
-}
-
-fn mean_square<const D: usize>(t: Tensor<D>) -> Tensor<1> {
-    t.square().mean()
-}
-
-/// `bitt bench-nets`: times forward + backward of one network; prints JSON.
+/// `bitt bench-nets`: times forward + backward of one network ([`bitt::nets_bench`]);
+/// prints JSON.
 pub fn bench(args: &BenchNetsArgs) -> Result<()> {
-    let device: Device = args.device.device()?.autodiff();
+    let device = args.device.device()?;
     let mut config = BittNetsConfig::preset(args.preset);
     config.btr.conv = args.conv.into();
     if let Some(t) = args.texels {
         config.num_texels = t;
     }
-    config.validate()?;
-    let (s, t) = (config.image_size, config.num_texels);
-    let mut seconds = Vec::with_capacity(args.runs);
-    let (params, input_shape) = match args.net {
-        BenchNet::Btr => {
-            let net = config.btr.init(&device);
-            let left = Tensor::<3>::random([1, 3, t], Distribution::Default, &device);
-            let right = Tensor::<3>::random([1, 3, t], Distribution::Default, &device);
-            for _ in 0..args.runs {
-                seconds.push(time_once(|| {
-                    let out = net.forward(left.clone(), right.clone());
-                    let grads = (mean_square(out.left) + mean_square(out.right)).backward();
-                    check_grads(&net, &grads)
-                })?);
-            }
-            (net.num_params(), vec![1, 3, t])
-        }
-        BenchNet::Albedo => {
-            let net = config.albedo.init(&device);
-            let image = Tensor::<4>::random([1, 3, s, s], Distribution::Default, &device);
-            for _ in 0..args.runs {
-                seconds.push(time_once(|| {
-                    let grads = mean_square(net.forward(image.clone())).backward();
-                    check_grads(&net, &grads)
-                })?);
-            }
-            (net.num_params(), vec![1, 3, s, s])
-        }
-        BenchNet::Step => {
-            let mut nets = config.init(&device)?;
-            let mut adam = bitt::optim::Adam::new(bitt::OptimConfig::default());
-            let image = Tensor::<4>::random([1, 3, s, s], Distribution::Default, &device);
-            let batch = Tensor::<4>::random([4, 3, s, s], Distribution::Default, &device);
-            let left = Tensor::<3>::random([1, 3, t], Distribution::Default, &device);
-            let right = Tensor::<3>::random([1, 3, t], Distribution::Default, &device);
-            for _ in 0..args.runs {
-                seconds.push(time_once(|| {
-                    let out = nets.btr.forward(left.clone(), right.clone());
-                    let loss = mean_square(nets.light.forward(image.clone()))
-                        + mean_square(nets.html.forward(image.clone()))
-                        + mean_square(nets.albedo.forward(batch.clone()))
-                        + mean_square(out.left)
-                        + mean_square(out.right);
-                    let grads = loss.backward();
-                    check_grads(&nets, &grads)?;
-                    nets = adam.step(nets.clone(), &grads, 1e-3);
-                    // Read a parameter back, so the timing includes the whole update.
-                    check_params(&nets)
-                })?);
-            }
-            (nets.num_params(), vec![1, 3, s, s])
-        }
+    let net = match args.net {
+        BenchNet::Btr => BenchedNet::Btr,
+        BenchNet::Albedo => BenchedNet::Albedo,
+        BenchNet::Step => BenchedNet::Step,
     };
+    let b = bench_net(net, &config, args.runs, &device)?;
     let out = serde_json::json!({
-        "net": match args.net {
-            BenchNet::Btr => "btr",
-            BenchNet::Albedo => "albedo",
-            BenchNet::Step => "step",
-        },
+        "net": net.name(),
         "preset": args.preset,
         "device": args.device,
         "conv": format!("{:?}", config.btr.conv),
-        "params": params,
-        "input_shape": input_shape,
-        "seconds": seconds,
+        "params": b.params,
+        "input_shape": b.input_shape,
+        "seconds": b.seconds,
     });
     println!("{out}");
-    Ok(())
-}
-
-/// Reads the first parameter back (its sum must be finite).
-fn check_params<M: Module>(net: &M) -> Result<()> {
-    struct First {
-        value: Option<f32>,
-    }
-    impl burn::module::ModuleVisitor for First {
-        fn visit_float<const D: usize>(&mut self, param: &burn::module::Param<Tensor<D>>) {
-            if self.value.is_none() {
-                self.value = Some(param.val().sum().into_scalar::<f32>());
-            }
-        }
-    }
-    let mut first = First { value: None };
-    net.visit(&mut first);
-    match first.value {
-        Some(v) if v.is_finite() => Ok(()),
-        other => anyhow::bail!("the first parameter's sum is {other:?} after the update"),
-    }
-}
-
-/// Reads one gradient back, so the timing includes the whole backward pass.
-fn check_grads<M: Module>(net: &M, grads: &burn::tensor::Gradients) -> Result<()> {
-    struct First<'a> {
-        grads: &'a burn::tensor::Gradients,
-        value: Option<f32>,
-    }
-    impl burn::module::ModuleVisitor for First<'_> {
-        fn visit_float<const D: usize>(&mut self, param: &burn::module::Param<Tensor<D>>) {
-            if self.value.is_none()
-                && let Some(g) = param.val().grad(self.grads)
-            {
-                self.value = Some(g.sum().into_scalar::<f32>());
-            }
-        }
-    }
-    let mut first = First { grads, value: None };
-    net.visit(&mut first);
-    first.value.context("no parameter received a gradient")?;
     Ok(())
 }

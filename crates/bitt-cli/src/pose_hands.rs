@@ -6,7 +6,6 @@ use anyhow::{Context, Result, bail};
 use bitt_mesh::annotation::{
     InterHandFrame, PosedTwoHands, annotation_image_size, scene_from_interhand_json,
 };
-use bitt_mesh::export::{ExportHand, write_glb, write_obj};
 use bitt_mesh::mano::{load_mano_pkl, save_safetensors};
 use bitt_mesh::{
     HandPair, Side, TwoHandScene, load_bitt_annotation, load_model_dir, procedural_pair,
@@ -140,36 +139,6 @@ fn scene(args: &PoseHandsArgs) -> Result<TwoHandScene> {
     )?)
 }
 
-/// Writes the posed hands (left then right) as OBJ and optionally GLB.
-pub fn write_hands(
-    models: &HandPair,
-    posed: &PosedTwoHands,
-    obj: &Path,
-    glb: Option<&Path>,
-) -> Result<()> {
-    let names = ["left_hand", "right_hand"];
-    let hands: Vec<ExportHand> = Side::BOTH
-        .iter()
-        .zip(names)
-        .filter_map(|(&side, name)| {
-            let p = posed.get(side)?;
-            let m = models.get(side);
-            Some(ExportHand {
-                name,
-                vertices: &p.vertices,
-                faces: &m.faces,
-                uv: m.uv.as_ref(),
-                texture: None,
-            })
-        })
-        .collect();
-    write_obj(obj, &hands)?;
-    if let Some(glb) = glb {
-        write_glb(glb, &hands)?;
-    }
-    Ok(())
-}
-
 /// Prints each hand's projected bounding box (text or one JSON object).
 pub fn report_boxes(scene: &TwoHandScene, posed: &PosedTwoHands, json: bool) {
     let mut boxes = serde_json::Map::new();
@@ -214,7 +183,7 @@ pub fn run(args: &PoseHandsArgs) -> Result<()> {
     let models = args.hands.models()?;
     let scene = scene(args)?;
     let posed = scene.pose_in_camera(&models)?;
-    write_hands(&models, &posed, &args.out, args.glb.as_deref())?;
+    posed.write(&models, &args.out, args.glb.as_deref())?;
     report_boxes(&scene, &posed, args.json);
     if !args.json {
         println!("wrote {}", args.out.display());

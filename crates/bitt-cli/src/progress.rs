@@ -3,6 +3,10 @@
 use std::io::Write;
 use std::time::Instant;
 
+use bitt::fit::{FitObserver, FitProgress};
+use bitt::refine::{RefineObserver, RefineProgress};
+use bitt::train_scene::SetupObserver;
+
 /// One progress line on stderr. On a terminal the bar is redrawn in place; when stderr is
 /// not a terminal (CI logs, `| tee`, Slurm output files) it prints one plain line at the first
 /// step, whenever another 10 % is done, and at the end, instead of carriage-return redraws
@@ -93,6 +97,78 @@ impl bitt_texture::FitProgress for PcaFitBar {
                 &text,
             );
         }
+    }
+}
+
+/// The mesh refinement's progress line.
+pub(crate) struct RefineBar {
+    line: ProgressLine,
+}
+
+impl RefineBar {
+    pub(crate) fn new() -> Self {
+        RefineBar {
+            line: ProgressLine::new(),
+        }
+    }
+}
+
+impl RefineObserver for RefineBar {
+    fn iteration(&mut self, p: &RefineProgress) {
+        let per = self.line.elapsed() / p.iteration.max(1) as f64;
+        let text = format!(
+            "{:5} loss {:.4} IoU {:.3} {:.2} s/it",
+            p.stage, p.terms.total, p.iou, per
+        );
+        self.line.show("refine ", p.iteration, p.iterations, &text);
+    }
+}
+
+/// The keypoint fit's progress line (its plan grows with each restart, so the caller ends
+/// the line).
+pub(crate) struct FitBar {
+    line: ProgressLine,
+}
+
+impl FitBar {
+    pub(crate) fn new() -> Self {
+        FitBar {
+            line: ProgressLine::open_ended(),
+        }
+    }
+}
+
+impl FitObserver for FitBar {
+    fn iteration(&mut self, p: &FitProgress) {
+        let text = format!(
+            "{:10} loss {:.4} {:.1} s",
+            p.stage,
+            p.loss,
+            self.line.elapsed()
+        );
+        self.line.show("fit ", p.iteration, p.iterations, &text);
+    }
+}
+
+/// A run's setup on stderr: its lines, and a bar for each refinement, keypoint fit and
+/// texture PCA fit.
+pub(crate) struct SetupLines;
+
+impl SetupObserver for SetupLines {
+    fn say(&mut self, line: &str) {
+        eprintln!("{line}");
+    }
+
+    fn refine(&mut self) -> Box<dyn RefineObserver> {
+        Box::new(RefineBar::new())
+    }
+
+    fn fit(&mut self) -> Box<dyn FitObserver> {
+        Box::new(FitBar::new())
+    }
+
+    fn pca(&mut self) -> Box<dyn bitt_texture::FitProgress> {
+        Box::new(PcaFitBar::new())
     }
 }
 

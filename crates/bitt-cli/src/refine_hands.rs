@@ -1,19 +1,16 @@
 //! `bitt refine-hands`: fit both hands' pose, shape, root and translation to the photo
 //! through the differentiable renderer; writes `hands.json`, `refine.json` and `overlay.png`.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use bitt::refine::{
-    RefineConfig, RefineObserver, RefineProgress, check_refine_out, refine_photo, refine_scene,
-    write_refine_outputs,
-};
-use bitt_nets::Preset;
+use bitt::config_files::refine_config;
+use bitt::refine::{check_refine_out, refine_photo, refine_scene, write_refine_outputs};
 use bitt_synth::SynthScene;
 
+use crate::args::{HandsArgs, TrainingArgs};
 use crate::device::DeviceName;
-use crate::progress::ProgressLine;
-use crate::train_scene::{HandsArgs, training_config};
+use crate::progress::RefineBar;
 
 /// Arguments of `bitt refine-hands`.
 #[derive(Debug, clap::Args)]
@@ -35,12 +32,10 @@ pub struct RefineHandsArgs {
     /// The hand models and the texture prior (of the photometric term).
     #[command(flatten)]
     pub hands: HandsArgs,
-    /// Preset whose image size (`quick`: 128) and texture prior the refinement uses.
-    #[arg(long, default_value = "quick")]
-    pub preset: Preset,
-    /// A training configuration file instead of --preset (its image size and texture prior).
-    #[arg(long, conflicts_with = "preset")]
-    pub config: Option<PathBuf>,
+    /// The training configuration whose image size (`quick`: 128) and texture prior the
+    /// refinement uses.
+    #[command(flatten)]
+    pub training: TrainingArgs,
     /// A refinement configuration (JSON, the `report.config` of a `refine.json`, edited).
     #[arg(long)]
     pub refine_config: Option<PathBuf>,
@@ -65,63 +60,10 @@ pub struct RefineHandsArgs {
     pub cache: PathBuf,
 }
 
-/// The mesh refinement's progress line (`crate::progress`).
-pub(crate) struct RefineBar {
-    line: ProgressLine,
-}
-
-impl RefineBar {
-    pub(crate) fn new() -> Self {
-        RefineBar {
-            line: ProgressLine::new(),
-        }
-    }
-}
-
-impl RefineObserver for RefineBar {
-    fn iteration(&mut self, p: &RefineProgress) {
-        let per = self.line.elapsed() / p.iteration.max(1) as f64;
-        let text = format!(
-            "{:5} loss {:.4} IoU {:.3} {:.2} s/it",
-            p.stage, p.terms.total, p.iou, per
-        );
-        self.line.show("refine ", p.iteration, p.iterations, &text);
-    }
-}
-
-/// The refinement configuration of the options.
-pub(crate) fn refine_config(
-    file: Option<&Path>,
-    rigid: Option<usize>,
-    full: Option<usize>,
-) -> Result<RefineConfig> {
-    let mut config = match file {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("reading {}", path.display()))?;
-            let config: RefineConfig =
-                bitt::config::read_config(&text, path, "a refinement configuration")?;
-            if let Err(e) = config.validate() {
-                bail!("{}: {e}", path.display());
-            }
-            config
-        }
-        None => RefineConfig::default(),
-    };
-    if let Some(n) = rigid {
-        config.rigid_iterations = n;
-    }
-    if let Some(n) = full {
-        config.full_iterations = n;
-    }
-    config.validate()?;
-    Ok(config)
-}
-
 /// `bitt refine-hands`.
 pub fn run(args: &RefineHandsArgs) -> Result<()> {
     let device = args.device.device()?.autodiff();
-    let train = training_config(args.config.as_deref(), args.preset)?;
+    let train = args.training.read()?;
     let config = refine_config(
         args.refine_config.as_deref(),
         args.rigid_iterations,
@@ -212,6 +154,7 @@ fn print_notes(notes: &[String]) {
 mod tests {
     use super::*;
     use bitt_tests::real_fixture::{AnnotationOptions, scratch, write_annotation, write_image};
+    use std::path::Path;
 
     type Cli = crate::test_args::Parsed<RefineHandsArgs>;
 

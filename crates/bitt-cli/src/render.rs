@@ -9,11 +9,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, anyhow, bail};
 use bitt::figure::{FigureHand, FigureImage, FigureOptions, default_light, render_figure};
+use bitt::figure_inputs::{hand_uvs, image_tensor, procedural_textures, read_light};
 use bitt_mesh::annotation::annotation_image_size;
-use bitt_mesh::{HandModel, HandPair, Side, UvLayout};
-use bitt_render::scene::LightValues;
-use bitt_texture::{SkinIdentity, TextureLayout, generate_texture, load_html_uvs, load_image};
-use burn::tensor::{Device, Tensor, TensorData};
+use bitt_mesh::{HandPair, Side, UvLayout};
+use bitt_texture::{ImageDifference, load_image};
 
 use crate::device::DeviceName;
 
@@ -76,33 +75,6 @@ pub struct RenderArgs {
     pub device: DeviceName,
 }
 
-/// Parses `--light`: inline JSON when it starts with `{`, else a JSON file.
-pub fn parse_light(arg: &str) -> Result<LightValues> {
-    // Inline JSON (an object, or anything else that parses as JSON and is not a file's
-    // name) is read as such; `[1, 2]` is a wrong light, not a file name.
-    let t = arg.trim_start();
-    let inline = t.starts_with('{')
-        || t.starts_with('[')
-        || (!Path::new(arg).exists() && serde_json::from_str::<serde_json::Value>(arg).is_ok());
-    let (text, source) = if inline {
-        (arg.to_string(), "--light".to_string())
-    } else {
-        let text = std::fs::read_to_string(arg)
-            .with_context(|| format!("--light: cannot read light file {arg}"))?;
-        (text, arg.to_string())
-    };
-    let light: LightValues = serde_json::from_str(&text).with_context(|| {
-        format!(
-            "{source}: expected JSON {{\"ambient\": [r, g, b], \"diffuse\": [r, g, b], \
-             \"specular\": [r, g, b], \"location\": [x, y, z]}}"
-        )
-    })?;
-    light
-        .validate()
-        .map_err(|e| anyhow!("{source}: {e} (every light value must be finite)"))?;
-    Ok(light)
-}
-
 /// `<stem><suffix>.png` next to `out` (e.g. `img.png` -> `img.left.png`).
 pub fn sibling(out: &Path, suffix: &str) -> PathBuf {
     let stem = out
@@ -114,32 +86,7 @@ pub fn sibling(out: &Path, suffix: &str) -> PathBuf {
 
 fn load_models(args: &RenderArgs) -> Result<(HandPair, [UvLayout; 2])> {
     let models = args.hands.models()?;
-    let uv_for = |side: Side, model: &HandModel| -> Result<UvLayout> {
-        let file = match side {
-            Side::Left => args.uvs_left.as_ref().or(args.uvs.as_ref()),
-            Side::Right => args.uvs.as_ref(),
-        };
-        let uv = match (file, &model.uv) {
-            (Some(f), _) => load_html_uvs(f)?,
-            (None, Some(uv)) => uv.clone(),
-            (None, None) => bail!(
-                "the {side} hand model ({}) has no UV layout; give --uvs FILE (HTML's uvs.pkl)",
-                model.source
-            ),
-        };
-        if uv.faces.len() != model.faces.len() {
-            bail!(
-                "the {side} hand's UV layout has {} faces but its mesh has {}",
-                uv.faces.len(),
-                model.faces.len()
-            );
-        }
-        Ok(uv)
-    };
-    let uvs = [
-        uv_for(Side::Left, &models.left)?,
-        uv_for(Side::Right, &models.right)?,
-    ];
+    let uvs = hand_uvs(&models, args.uvs.as_deref(), args.uvs_left.as_deref())?;
     Ok((models, uvs))
 }
 
@@ -154,51 +101,6 @@ fn load_scene(args: &RenderArgs, models: &HandPair) -> Result<bitt_mesh::TwoHand
         .image_size
         .unwrap_or_else(|| annotation_image_size(path));
     Ok(bitt_mesh::load_bitt_annotation(path, size)?)
-}
-
-/// Reads a planar `[3, H, W]` image tensor from a file.
-fn image_tensor(path: &Path, what: &str, device: &Device) -> Result<(Tensor<3>, [usize; 2])> {
-    let img =
-        load_image(path).with_context(|| format!("{what}: cannot load {}", path.display()))?;
-    let (w, h) = (img.width, img.height);
-    if w < 2 || h < 2 {
-        bail!(
-            "{what}: {} is {w}x{h}; it must be at least 2x2",
-            path.display()
-        );
-    }
-    Ok((
-        Tensor::from_data(TensorData::new(img.data, [3, h, w]), device),
-        [h, w],
-    ))
-}
-
-/// The default per-hand textures: procedural skin of one person, `[3, S, S]` each.
-fn procedural_textures(
-    args: &RenderArgs,
-    models: &HandPair,
-    uvs: &[UvLayout; 2],
-    device: &Device,
-) -> Result<Vec<Tensor<3>>> {
-    let id = SkinIdentity::sample(args.skin_seed);
-    let s = args.uv_size;
-    [Side::Left, Side::Right]
-        .iter()
-        .zip(uvs)
-        .map(|(&side, uv)| {
-            let layout = TextureLayout::from_uv(uv, s, s, 2)?;
-            let compact =
-                generate_texture(&layout, models.get(side), &id, side).with_context(|| {
-                    format!(
-                        "the procedural skin texture needs the procedural hand; \
-                         give --texture FILE for the {side} hand of {}",
-                        models.get(side).source
-                    )
-                })?;
-            let image = layout.compact_to_image(&compact, [0.0; 3])?;
-            Ok(Tensor::from_data(TensorData::new(image, [3, s, s]), device))
-        })
-        .collect()
 }
 
 /// `bitt render`.
@@ -231,7 +133,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     }
     // Inputs first: light, models, scene, textures, the image to unwrap.
     let light = match &args.light {
-        Some(l) => parse_light(l)?,
+        Some(l) => read_light(l)?,
         None => default_light(),
     };
     let device = args.device.device()?;
@@ -267,7 +169,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             let (t, _) = image_tensor(path, "--texture", &device)?;
             vec![t.clone(), t]
         }
-        None => procedural_textures(args, &models, &uvs, &device)?,
+        None => procedural_textures(&models, &uvs, args.skin_seed, args.uv_size, &device)?,
     };
     let camera = &scene.camera;
     let unwrap = match &args.unwrap {
@@ -319,7 +221,7 @@ fn write_all(out: &Path, images: &[FigureImage]) -> Result<()> {
 pub fn image_diff(a: &Path, b: &Path) -> Result<()> {
     let ia = load_image(a).with_context(|| format!("cannot load {}", a.display()))?;
     let ib = load_image(b).with_context(|| format!("cannot load {}", b.display()))?;
-    if (ia.width, ia.height) != (ib.width, ib.height) {
+    let Some(d) = ImageDifference::between(&ia, &ib) else {
         bail!(
             "{} is {}x{} but {} is {}x{}",
             a.display(),
@@ -329,22 +231,14 @@ pub fn image_diff(a: &Path, b: &Path) -> Result<()> {
             ib.width,
             ib.height
         );
-    }
-    let n = ia.data.len().max(1) as f64;
-    let (sum, max) = ia
-        .data
-        .iter()
-        .zip(&ib.data)
-        .map(|(x, y)| f64::from((x - y).abs()))
-        .fold((0.0, 0.0f64), |(s, m), d| (s + d, m.max(d)));
-    let mean = |d: &[f32]| d.iter().map(|&x| f64::from(x)).sum::<f64>() / n;
+    };
     println!(
         "{}",
         serde_json::json!({
-            "mean_abs_diff": sum / n,
-            "max_abs_diff": max,
-            "mean_a": mean(&ia.data),
-            "mean_b": mean(&ib.data),
+            "mean_abs_diff": d.mean_abs_diff,
+            "max_abs_diff": d.max_abs_diff,
+            "mean_a": d.mean_a,
+            "mean_b": d.mean_b,
         })
     );
     Ok(())
@@ -372,41 +266,6 @@ mod tests {
 
     fn error_of(a: &RenderArgs) -> String {
         format!("{:#}", run(a).expect_err("must fail"))
-    }
-
-    #[test]
-    fn light_json_is_checked() {
-        let ok = parse_light(
-            r#"{"ambient":[0.5,0.5,0.5],"diffuse":[0.1,0.1,0.1],"specular":[0,0,0],"location":[0,1,0]}"#,
-        )
-        .unwrap();
-        assert_eq!(ok.location, [0.0, 1.0, 0.0]);
-        let e = format!(
-            "{:#}",
-            parse_light(r#"{"ambient":[0.5,0.5,0.5]}"#).unwrap_err()
-        );
-        assert!(e.contains("--light") && e.contains("diffuse"), "{e}");
-        let e = format!("{:#}", parse_light(r#"{"ambient":[NaN,0,0]}"#).unwrap_err());
-        assert!(e.contains("--light"), "{e}");
-        // Too large for f32: becomes infinite, which the check rejects.
-        let e = format!(
-            "{:#}",
-            parse_light(
-                r#"{"ambient":[1e39,0,0],"diffuse":[0,0,0],"specular":[0,0,0],"location":[0,1,0]}"#
-            )
-            .unwrap_err()
-        );
-        assert!(e.contains("ambient") && e.contains("finite"), "{e}");
-        let e = format!("{:#}", parse_light("/nonexistent/light.json").unwrap_err());
-        assert!(e.contains("/nonexistent/light.json"), "{e}");
-        // Inline JSON that is not a light object is named as --light, not read as a file.
-        for wrong in ["[1,2]", " [1, 2, 3]", "42", "\"sun\""] {
-            let e = format!("{:#}", parse_light(wrong).unwrap_err());
-            assert!(
-                e.starts_with("--light: expected JSON") && !e.contains("cannot read"),
-                "{wrong}: {e}"
-            );
-        }
     }
 
     #[test]

@@ -23,7 +23,6 @@ use bitt_mesh::PinholeCamera;
 
 use crate::avatar_pose::OtherPoseArgs;
 use crate::device::DeviceName;
-use crate::render::parse_light;
 
 /// Arguments of `bitt render-avatar`.
 #[derive(Debug, clap::Args)]
@@ -103,7 +102,11 @@ pub fn run(args: &RenderAvatarArgs) -> Result<()> {
     if args.out.extension().and_then(|e| e.to_str()) != Some("png") {
         bail!("--out {}: must be a .png file", args.out.display());
     }
-    let user_light = args.light.as_deref().map(parse_light).transpose()?;
+    let user_light = args
+        .light
+        .as_deref()
+        .map(bitt::figure_inputs::read_light)
+        .transpose()?;
     args.other_pose.check()?;
     let saved = SavedRun::load(&args.run)?;
     let device = args.device.device()?;

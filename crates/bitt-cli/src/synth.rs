@@ -5,10 +5,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use bitt_synth::{
-    BENCHMARK_SCENES, MeshNoise, SynthConfig, TexelStats, benchmark_seeds, contact_sheet,
-    generate_scene,
-};
+use bitt_synth::{BENCHMARK_SCENES, MeshNoise, SynthConfig, benchmark_seeds, write_scene_set};
 
 use crate::device::DeviceName;
 
@@ -87,61 +84,26 @@ pub fn run(args: &SynthArgs) -> Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("--out {}: cannot create the folder", args.out.display()))?;
     let sheet_n = args.sheet_scenes.unwrap_or(12).clamp(1, 24);
-    let mut sheet_scenes = Vec::new();
-    let mut stats = Vec::new();
-    let mut per_scene = Vec::new();
     let started = Instant::now();
-    for (i, &seed) in seeds.iter().enumerate() {
-        let t0 = Instant::now();
-        let scene = generate_scene(&config, seed, &device)
-            .with_context(|| format!("generating scene {i} (seed {seed})"))?;
-        let gen_s = t0.elapsed().as_secs_f64();
-        let dir = args.out.join(format!("scene_{i:03}"));
-        scene.write(&dir)?;
-        let s = scene.stats;
+    let set = write_scene_set(&config, &seeds, &args.out, sheet_n, &device, |w| {
+        let t = w.stats.table3;
         eprintln!(
-            "scene {i:3} seed {seed:#018x} {:13} left {} right {} sym {} invisible {}  ({gen_s:.1} s + write {:.1} s)",
-            format!("{:?}", scene.train.family),
-            percent(s.table3.left_visible),
-            percent(s.table3.right_visible),
-            percent(s.table3.symmetric_usable),
-            percent(s.table3.invisible),
-            t0.elapsed().as_secs_f64() - gen_s,
+            "scene {:3} seed {:#018x} {:13} left {} right {} sym {} invisible {}  ({:.1} s + write {:.1} s)",
+            w.index,
+            w.seed,
+            format!("{:?}", w.family),
+            percent(t.left_visible),
+            percent(t.right_visible),
+            percent(t.symmetric_usable),
+            percent(t.invisible),
+            w.generate_s,
+            w.write_s,
         );
-        per_scene.push(serde_json::json!({
-            "folder": dir.file_name().map(|n| n.to_string_lossy().into_owned()),
-            "seed": seed,
-            "family": scene.train.family,
-            "stats": s,
-            "seconds": gen_s,
-        }));
-        stats.push(s);
-        if i < sheet_n {
-            sheet_scenes.push(scene);
-        }
-    }
-    let mean = TexelStats::mean(&stats).context("no scenes")?;
-    let summary = serde_json::json!({
-        "config": config,
-        "scenes": args.scenes,
-        "mean": mean,
-        "paper_interhand": {
-            "left_visible": 0.3540, "right_visible": 0.3644,
-            "symmetric_usable": 0.2429, "invisible": 0.1989,
-        },
-        "per_scene": per_scene,
-        "seconds": started.elapsed().as_secs_f64(),
-    });
-    let stats_path = args.out.join("stats.json");
-    bitt_mesh::export::write_atomically(
-        &stats_path,
-        serde_json::to_string_pretty(&summary)?.as_bytes(),
-    )?;
-    let (sheet, w, h) = contact_sheet(&sheet_scenes)?;
-    let sheet_path = args.out.join("contact.png");
-    bitt_texture::save_png8(&sheet_path, &sheet, w, h)?;
+    })?;
+    let (sheet, w, h) = &set.sheet;
+    let (mean, stats_path, sheet_path) = (set.mean, &set.stats_path, &set.sheet_path);
     if let Some(extra) = &args.sheet {
-        bitt_texture::save_png8(extra, &sheet, w, h)
+        bitt_texture::save_png8(extra, sheet, *w, *h)
             .with_context(|| format!("--sheet {}", extra.display()))?;
     }
     let t = mean.table3;

@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
+use bitt_texture::procedural::noise::SplitMix64;
 use bitt_texture::procedural::{ProceduralTextureConfig, procedural_texture_pca};
 use bitt_texture::{TexturePca, convert_html, load_html_model, save_png8, save_png16};
 
@@ -48,17 +49,10 @@ pub struct TextureArgs {
 
 /// Standard normal numbers from a seed (SplitMix64 + Box-Muller), reproducible everywhere.
 fn normal_params(seed: u64, n: usize) -> Vec<f32> {
-    let mut state = seed;
-    let mut next = || {
-        state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = state;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rng = SplitMix64::new(seed);
     (0..n)
         .map(|_| {
-            let (u1, u2) = (next().max(1e-300), next());
+            let (u1, u2) = (rng.next_f64().max(1e-300), rng.next_f64());
             ((-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()) as f32
         })
         .collect()

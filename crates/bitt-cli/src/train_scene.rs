@@ -2,40 +2,27 @@
 //! annotation pickle, or an InterHand2.6M scene) and write the run folder (the main job).
 
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
-use std::sync::OnceLock;
+use anyhow::{Result, bail};
+use bitt::config_files::refine_config;
+use bitt::real::RealScores;
+use bitt::run::files;
+use bitt::run_folder::{fresh_out, write_fresh_run};
+use bitt::train_scene::{
+    FreshRequest, FreshRun, KeypointInput, SceneInput, finish_run, fresh_run, resumed_run,
+};
+use bitt::{Observer, Progress, TrainConfig};
+use bitt_mesh::interhand::{InterHandSelection, PAPER_NOVEL_POSES, PAPER_NOVEL_VIEWS};
+
+use crate::args::{HandsArgs, KeypointArgs, TrainingArgs};
+use crate::device::DeviceName;
+use crate::progress::{ProgressLine, SetupLines};
 
 /// Where a run goes without `--out`.
 const DEFAULT_OUT: &str = "runs/train-scene";
-
-use anyhow::{Context, Result, bail};
-use bitt::assets::HandAssets;
-use bitt::fit::{fit_keypoints, fit_photo, record_synthetic_fit};
-use bitt::real::keypoint_setup;
-use bitt::real::{
-    HandSource, PriorSource, RealInput, RealScores, annotation_setup, interhand_setup, score_real,
-};
-use bitt::refine::{
-    MeshRefine, RefineConfig, RefineObserver, Refinement, pca_pose_notes, refine_synthetic,
-};
-use bitt::run::{files, synthetic_trainer, texture_prior_with_progress, write_run};
-use bitt::run_folder::{FitOutput, RunInput, fresh_out, load_checkpoints, write_fresh_run};
-use bitt::{Observer, Progress, TrainConfig, Trainer};
-use bitt_mesh::PinholeCamera;
-use bitt_mesh::interhand::{
-    InterHandDataset, InterHandSelection, PAPER_NOVEL_POSES, PAPER_NOVEL_VIEWS,
-};
-use bitt_mesh::keypoints::{KeypointOptions, read_keypoints};
-use bitt_nets::Preset;
-use bitt_synth::{SynthConfig, SynthScene};
-
-use crate::device::DeviceName;
-use crate::fit_hands::FitBar;
-use crate::progress::ProgressLine;
-use crate::refine_hands::{RefineBar, refine_config};
 
 /// Arguments of `bitt train-scene`.
 #[derive(Debug, clap::Args)]
@@ -61,7 +48,7 @@ pub struct TrainSceneArgs {
     pub keypoints: Option<PathBuf>,
     /// Keypoint format, mirroring, intrinsics and fit configuration (with --keypoints).
     #[command(flatten)]
-    pub keypoint: crate::fit_hands::KeypointArgs,
+    pub keypoint: KeypointArgs,
     /// With --image --keypoints: the photo's hand mask (white = hand); the fitted hands are
     /// then refined against it before training.
     #[arg(long, requires = "keypoints")]
@@ -91,12 +78,9 @@ pub struct TrainSceneArgs {
     /// Real data: the hand models and texture prior.
     #[command(flatten)]
     pub hands: HandsArgs,
-    /// Named configuration.
-    #[arg(long, default_value = "quick")]
-    pub preset: Preset,
-    /// A full training configuration (a run's `config.json`, edited) instead of --preset.
-    #[arg(long, conflicts_with = "preset")]
-    pub config: Option<PathBuf>,
+    /// The training configuration.
+    #[command(flatten)]
+    pub training: TrainingArgs,
     /// Backend.
     #[arg(long, value_enum, default_value = "flex")]
     pub device: DeviceName,
@@ -165,14 +149,6 @@ impl Observer for Bar {
     }
 }
 
-fn scene_config(config: &TrainConfig) -> SynthConfig {
-    SynthConfig {
-        size: config.nets.image_size as u32,
-        texture_size: config.texture.resolution,
-        ..SynthConfig::default()
-    }
-}
-
 /// The Ctrl-C flag, its handler installed once per process (tests run several trainings).
 fn stop_flag() -> Result<Arc<AtomicBool>> {
     static FLAG: OnceLock<Result<Arc<AtomicBool>, String>> = OnceLock::new();
@@ -193,25 +169,17 @@ fn stop_flag() -> Result<Arc<AtomicBool>> {
     }
 }
 
-/// What a fresh run starts from.
-type Fresh = (Trainer, RunInput, Option<Refinement>, Option<FitOutput>);
-
+/// A fresh run's inputs read and checked, and its trainer built (`bitt::train_scene`).
 fn fresh(
     args: &TrainSceneArgs,
     config: TrainConfig,
     device: &burn::tensor::Device,
-) -> Result<Fresh> {
-    let cache = Some(args.cache.as_path());
-    let refine_config = if args.refine_mesh {
+) -> Result<FreshRun> {
+    let refine = if args.refine_mesh {
         Some(refine_config(args.refine_config.as_deref(), None, None)?)
     } else {
         None
     };
-    let mut bar = RefineBar::new();
-    let mut refine = refine_config.as_ref().map(|config| MeshRefine {
-        config,
-        observer: &mut bar,
-    });
     let real = args.image.is_some() || args.interhand.is_some();
     if !real && (args.hands.model_dir.is_some() || args.hands.html_dir.is_some()) {
         bail!(
@@ -219,369 +187,48 @@ fn fresh(
              or --interhand ROOT"
         );
     }
-    let (hands, prior) = args.hands.sources();
-    if let (Some(image), None) = (&args.image, &args.annotation) {
-        let Some(keypoints) = &args.keypoints else {
-            bail!("--image needs --annotation PKL or --keypoints FILE");
-        };
-        eprintln!(
-            "real data: {} with the keypoints {} (fitting both hands to them first)",
-            image.display(),
-            keypoints.display()
-        );
-        let fit_config = args.keypoint.config()?;
-        let mask_refine = RefineConfig::default();
-        let mut mask_bar = RefineBar::new();
-        let fit = fit_photo(
-            image,
-            &args.keypoint.source(keypoints),
-            args.keypoint.intrinsics()?,
-            args.mask.as_deref(),
-            &hands,
-            &prior,
-            &fit_config,
-            args.mask.as_ref().map(|_| {
-                (
-                    &config,
-                    &mask_refine,
-                    &mut mask_bar as &mut dyn RefineObserver,
-                )
-            }),
-            cache,
-            device,
-            &mut FitBar::new(),
-        )
-        .with_context(|| {
-            format!(
-                "fitting --image {} --keypoints {}",
-                image.display(),
-                keypoints.display()
-            )
-        })?;
-        eprintln!();
-        for n in &fit.fit.report.notes {
-            eprintln!("note: {n}");
-        }
-        let setup = keypoint_setup(
-            &fit,
-            image,
-            keypoints,
-            &hands,
-            &prior,
-            config,
-            cache,
-            refine.take(),
-            device,
-        )?;
-        return Ok((
-            setup.trainer,
-            RunInput::Real(Box::new(setup.input), Box::new(setup.scene)),
-            setup.refinement,
-            Some(FitOutput {
-                record: fit.record(),
-                overlay: fit.overlay.clone(),
-            }),
-        ));
-    }
-    if let (Some(image), Some(annotation)) = (&args.image, &args.annotation) {
-        eprintln!(
-            "real data: {} with {} ({} hands, {} texture prior)",
-            image.display(),
-            annotation.display(),
-            if args.hands.model_dir.is_some() {
-                "MANO"
-            } else {
-                "procedural"
-            },
-            if args.hands.html_dir.is_some() {
-                "HTML"
-            } else {
-                "procedural PCA"
-            },
-        );
-        let setup = annotation_setup(
-            image,
-            annotation,
-            &hands,
-            &prior,
-            config,
-            cache,
-            refine.take(),
-            device,
-        )
-        .with_context(|| {
-            format!(
-                "real data --image {} --annotation {}",
-                image.display(),
-                annotation.display()
-            )
-        })?;
-        if setup.refinement.is_none() {
-            for n in pca_pose_notes(
-                &setup.trainer.assets.models,
-                &setup.input.train.hands,
-                "its fingers are posed by meaningless numbers (add --refine-mesh to fit them to the photo)",
-            ) {
-                eprintln!("note: {n}");
+    let keypoints = |path: &Path| KeypointInput {
+        source: args.keypoint.source(path),
+        intrinsics: args.keypoint.intrinsics.clone(),
+        config: args.keypoint.fit_config.clone(),
+    };
+    let input = match (&args.image, &args.annotation, &args.interhand) {
+        (Some(image), None, _) => {
+            let Some(path) = &args.keypoints else {
+                bail!("--image needs --annotation PKL or --keypoints FILE");
+            };
+            SceneInput::PhotoKeypoints {
+                image,
+                keypoints: keypoints(path),
+                mask: args.mask.as_deref(),
             }
         }
-        return Ok((
-            setup.trainer,
-            RunInput::Real(Box::new(setup.input), Box::new(setup.scene)),
-            setup.refinement,
-            None,
-        ));
-    }
-    if let Some(root) = &args.interhand {
-        let split = args.split.as_deref().unwrap_or("test");
-        eprintln!(
-            "reading InterHand2.6M {split} annotations below {}",
-            root.display()
-        );
-        let dataset = InterHandDataset::open(root, split)?;
-        eprintln!("InterHand2.6M {split}: {}", dataset.counts);
-        let selection = InterHandSelection {
-            capture: args.capture,
-            frame: args.frame,
-            camera: args.camera.clone(),
-            novel_views: args.novel_views.unwrap_or(PAPER_NOVEL_VIEWS),
-            novel_poses: args.novel_poses.unwrap_or(PAPER_NOVEL_POSES),
-        };
-        let scene = dataset.select(&selection)?;
-        eprintln!(
-            "selected capture {}, frame {}, camera {} ({} novel views, {} novel poses)",
-            scene.capture,
-            scene.train.entry.frame_idx,
-            scene.train.entry.camera,
-            scene.novel_views.len(),
-            scene.novel_poses.len()
-        );
-        let setup = interhand_setup(
-            &scene,
-            &dataset.paths,
-            &hands,
-            &prior,
-            config,
-            cache,
-            refine.take(),
-            device,
-        )?;
-        return Ok((
-            setup.trainer,
-            RunInput::Real(Box::new(setup.input), Box::new(setup.scene)),
-            setup.refinement,
-            None,
-        ));
-    }
-    let mut scene = match &args.scene {
-        Some(dir) => SynthScene::read(dir).with_context(|| format!("--scene {}", dir.display()))?,
-        None => {
-            eprintln!(
-                "building the demo scene (synthetic generator, cached in {})",
-                args.cache.display()
-            );
-            bitt_synth::cached_scene(
-                &scene_config(&config),
-                bitt_synth::demo_scene_seed(),
-                &args.cache.join("scenes"),
-                &device.clone().inner(),
-            )?
-        }
-    };
-    let fit_output = match &args.keypoints {
-        Some(keypoints) => Some(fit_synthetic(args, &mut scene, keypoints, device)?),
-        None => None,
-    };
-    let pca = procedural_prior(&config, cache, device)?;
-    let refinement = match refine {
-        Some(r) => {
-            eprintln!("refining the given meshes against the training image");
-            let assets = HandAssets::new(bitt_mesh::procedural_pair(), config.texture.resolution)?;
-            let done = refine_synthetic(
-                &scene,
-                &assets,
-                &pca,
-                config.nets.image_size,
-                r.config,
-                device,
-                r.observer,
-            )?;
-            scene.given = done.hands.clone();
-            Some(done)
-        }
-        None => None,
-    };
-    let trainer = synthetic_trainer(&scene, &config, &pca, device)?;
-    Ok((
-        trainer,
-        RunInput::Synthetic(Box::new(scene)),
-        refinement,
-        fit_output,
-    ))
-}
-
-/// Fits a synthetic scene's hands to `keypoints` of its training image (the scene's true
-/// camera, or `--intrinsics`) and makes them the scene's given meshes.
-fn fit_synthetic(
-    args: &TrainSceneArgs,
-    scene: &mut SynthScene,
-    keypoints: &Path,
-    device: &burn::tensor::Device,
-) -> Result<FitOutput> {
-    if args.keypoint.mirrored {
-        bail!("--mirrored applies to photos, not to a synthetic scene");
-    }
-    let truth = scene.train.hands.camera;
-    let options = KeypointOptions {
-        format: args.keypoint.format.map(Into::into),
-        image_size: [truth.width, truth.height],
-        mirrored: false,
-    };
-    let points = read_keypoints(keypoints, &options)?;
-    let camera = match args.keypoint.intrinsics()? {
-        Some([fx, fy, cx, cy]) => PinholeCamera {
-            intrinsics: PinholeCamera::from_intrinsics(
-                [fx, fy],
-                [cx, cy],
-                truth.width,
-                truth.height,
-            )?
-            .intrinsics,
-            ..truth
+        (Some(image), Some(annotation), _) => SceneInput::PhotoAnnotation { image, annotation },
+        (None, _, Some(root)) => SceneInput::InterHand {
+            root,
+            split: args.split.as_deref().unwrap_or("test"),
+            selection: InterHandSelection {
+                capture: args.capture,
+                frame: args.frame,
+                camera: args.camera.clone(),
+                novel_views: args.novel_views.unwrap_or(PAPER_NOVEL_VIEWS),
+                novel_poses: args.novel_poses.unwrap_or(PAPER_NOVEL_POSES),
+            },
         },
-        None => truth,
+        (None, _, None) => SceneInput::Synthetic {
+            scene: args.scene.as_deref(),
+            keypoints: args.keypoints.as_deref().map(keypoints),
+        },
     };
-    eprintln!(
-        "fitting both hands to the keypoints {} of the scene's training image",
-        keypoints.display()
-    );
-    let models = bitt_mesh::procedural_pair();
-    let fit = fit_keypoints(
-        &models,
-        &points,
-        &camera,
-        &args.keypoint.config()?,
-        device,
-        &mut FitBar::new(),
-    )
-    .with_context(|| format!("fitting --keypoints {}", keypoints.display()))?;
-    eprintln!();
-    for n in &fit.report.notes {
-        eprintln!("note: {n}");
-    }
-    if fit.hands.left.is_none() || fit.hands.right.is_none() {
-        bail!(
-            "{}: a hand has too few keypoints to be fitted; BiTT needs both",
-            keypoints.display()
-        );
-    }
-    let (scores, output) = record_synthetic_fit(&fit, scene, &points, &camera, keypoints)?;
-    eprintln!(
-        "fitted in {:.1} s: 2D joints {:.2} px, root-relative 3D joints {:.1} mm from the truth",
-        fit.report.seconds, scores.joint_2d_px, scores.joint_3d_mm
-    );
-    Ok(output)
-}
-
-/// A resumed run's trainer (checkpoint restored) and input.
-fn resumed(
-    args: &TrainSceneArgs,
-    dir: &Path,
-    device: &burn::tensor::Device,
-) -> Result<(Trainer, RunInput)> {
-    let path = dir.join(files::CONFIG);
-    let text = std::fs::read_to_string(&path)
-        .with_context(|| format!("--resume {}: cannot read {}", dir.display(), path.display()))?;
-    let mut config = TrainConfig::from_json(&text, &path)?;
-    if let Some(n) = args.iterations {
-        config.iterations = n;
-        config.validate()?;
-    }
-    // The run's input: `input.json` for real data, `scene/` for a synthetic scene.
-    let real = RealInput::is_real_run(dir);
-    if !real && !dir.join(files::SCENE).join("scene.json").is_file() {
-        bail!(
-            "--resume {}: the run's input is missing: neither {} (real data) nor {} \
-             (a synthetic scene) is there",
-            dir.display(),
-            dir.join(bitt::real::files::INPUT).display(),
-            dir.join(files::SCENE).join("scene.json").display()
-        );
-    }
-    let (checkpoint, previous, warnings) = load_checkpoints(dir)
-        .with_context(|| format!("--resume {}: no usable checkpoint", dir.display()))?;
-    for w in warnings {
-        eprintln!("warning: {w}");
-    }
-    // Temporaries of writes a killed process never finished (it is a run folder of ours).
-    for path in bitt_mesh::export::remove_stale_temporaries(dir)? {
-        eprintln!("removed {}, left by an interrupted write", path.display());
-    }
-    if let Some(n) = args.iterations
-        && n < checkpoint.iteration
-    {
-        bail!(
-            "--resume {}: the run is already at iteration {}; --iterations {n} would end before \
-             it (give at least {})",
-            dir.display(),
-            checkpoint.iteration,
-            checkpoint.iteration
-        );
-    }
-    let cache = Some(args.cache.as_path());
-    let (mut trainer, input) = if real {
-        let (input, scene, trainer) = RealInput::resume_trainer(dir, config, cache, device)
-            .with_context(|| format!("--resume {}: the run's real input", dir.display()))?;
-        (trainer, RunInput::Real(Box::new(input), Box::new(scene)))
-    } else {
-        let scene = SynthScene::read(&dir.join(files::SCENE))
-            .with_context(|| format!("--resume {}: the run's scene", dir.display()))?;
-        let pca = procedural_prior(&config, cache, device)?;
-        let trainer = synthetic_trainer(&scene, &config, &pca, device)?;
-        (trainer, RunInput::Synthetic(Box::new(scene)))
+    let (hands, prior) = args.hands.sources();
+    let request = FreshRequest {
+        input,
+        hands,
+        prior,
+        refine,
+        cache: &args.cache,
     };
-    trainer.resume_from(&checkpoint, previous)?;
-    eprintln!(
-        "resuming at iteration {} of {}",
-        checkpoint.iteration, trainer.config.iterations
-    );
-    Ok((trainer, input))
-}
-
-/// The configuration of `--config FILE` (a full `TrainConfig`), else the named preset.
-pub(crate) fn training_config(config: Option<&Path>, preset: Preset) -> Result<TrainConfig> {
-    match config {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("reading {}", path.display()))?;
-            Ok(TrainConfig::from_json(&text, path)?)
-        }
-        None => Ok(TrainConfig::preset(preset)),
-    }
-}
-
-/// The hand models and texture prior of real data (`train-scene`, `refine-hands`).
-#[derive(Debug, Clone, clap::Args)]
-pub struct HandsArgs {
-    /// Real data: folder with MANO_LEFT / MANO_RIGHT (`.pkl` or `.safetensors`); needs
-    /// --html-dir. Default: the procedural hands.
-    #[arg(long, conflicts_with = "procedural")]
-    pub model_dir: Option<PathBuf>,
-    /// Real data: use the procedural hands (the default without --model-dir).
-    #[arg(long)]
-    pub procedural: bool,
-    /// Real data: HTML's TextureBasis folder (html.safetensors or model_wosr/model.pkl, and
-    /// uvs*.pkl) as the texture prior, resampled to the preset's texture size; needs
-    /// --model-dir. Default: the procedural texture PCA.
-    #[arg(long, requires = "model_dir")]
-    pub html_dir: Option<PathBuf>,
-}
-
-impl HandsArgs {
-    /// The sources these options name.
-    pub fn sources(&self) -> (HandSource, PriorSource) {
-        bitt::real::sources(self.model_dir.as_deref(), self.html_dir.as_deref())
-    }
+    Ok(fresh_run(&request, config, device, &mut SetupLines)?)
 }
 
 /// Refuses path arguments that are not valid UTF-8 before anything is read or written: a
@@ -594,7 +241,7 @@ fn check_utf8_paths(args: &TrainSceneArgs) -> Result<()> {
         ("--keypoints", &args.keypoints),
         ("--mask", &args.mask),
         ("--interhand", &args.interhand),
-        ("--config", &args.config),
+        ("--config", &args.training.config),
         ("--resume", &args.resume),
         ("--refine-config", &args.refine_config),
         ("--model-dir", &args.hands.model_dir),
@@ -624,7 +271,8 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
     let device = args.device.device()?.autodiff();
     let (out, mut trainer, input) = match &args.resume {
         Some(dir) => {
-            let (trainer, input) = resumed(args, dir, &device)?;
+            let (trainer, input) =
+                resumed_run(dir, args.iterations, &args.cache, &device, &mut SetupLines)?;
             (dir.clone(), trainer, input)
         }
         None => {
@@ -632,7 +280,7 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
             if let Some(note) = note {
                 println!("{note}");
             }
-            let mut config = training_config(args.config.as_deref(), args.preset)?;
+            let mut config = args.training.read()?;
             if let Some(n) = args.iterations {
                 config.iterations = n;
             }
@@ -642,7 +290,12 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
             config.validate()?;
             // Every input is read and checked (and the trainer built) before the run folder
             // is created, so a bad input leaves nothing behind.
-            let (trainer, input, refinement, fit) = fresh(args, config, &device)?;
+            let FreshRun {
+                trainer,
+                input,
+                refinement,
+                fit,
+            } = fresh(args, config, &device)?;
             write_fresh_run(&out, &trainer, &input, fit.as_ref(), refinement.as_ref())?;
             if let Some(r) = &refinement {
                 for n in &r.report.notes {
@@ -693,18 +346,7 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
         r => r?,
     }
     eprintln!("writing results");
-    let clip = input.novel_pose_clip();
-    let summary = write_run(&out, &trainer, input.synthetic(), args.turntable, &clip)?;
-    let real_scores = match &input {
-        RunInput::Real(_, scene)
-            if !(scene.novel_views.is_empty() && scene.novel_poses.is_empty()) =>
-        {
-            let scores = score_real(&trainer, scene)?;
-            bitt::run::write_real_scores(&out, &scores)?;
-            Some(scores)
-        }
-        _ => None,
-    };
+    let (summary, real_scores) = finish_run(&out, &trainer, &input, args.turntable)?;
     print_summary(
         &out,
         &summary,
@@ -721,25 +363,6 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
         );
     }
     Ok(())
-}
-
-/// The procedural texture PCA of `config.texture`, from the cache or fitted with a progress
-/// line and cached.
-fn procedural_prior(
-    config: &TrainConfig,
-    cache: Option<&Path>,
-    device: &burn::tensor::Device,
-) -> Result<bitt_texture::TexturePca> {
-    eprintln!(
-        "fitting / loading the texture PCA ({} components)",
-        config.texture.components
-    );
-    Ok(texture_prior_with_progress(
-        config,
-        cache,
-        &device.clone().inner(),
-        &crate::progress::PcaFitBar::new(),
-    )?)
 }
 
 fn print_summary(out: &Path, s: &bitt::run::RunSummary, real: Option<&RealScores>, wall: f64) {
@@ -790,6 +413,9 @@ fn print_summary(out: &Path, s: &bitt::run::RunSummary, real: Option<&RealScores
 #[cfg(test)]
 mod tests {
     use super::*;
+    use bitt::real::RealInput;
+    use bitt::run_folder::load_checkpoints;
+    use bitt_nets::Preset;
     use bitt_tests::real_fixture::{AnnotationOptions, scratch, write_annotation, write_image};
 
     type Cli = crate::test_args::Parsed<TrainSceneArgs>;

@@ -9,6 +9,7 @@ use glam::{DMat3, DVec3};
 use crate::FileErrorExt;
 use crate::MeshError;
 use crate::camera::{PinholeCamera, PixelBox};
+use crate::export::{ExportHand, write_glb, write_obj};
 use crate::lbs::{HandParams, HandPose, PosedHand, rodrigues};
 use crate::mano::HandPair;
 use crate::model::{NUM_BETAS, NUM_POSE, Side};
@@ -59,6 +60,40 @@ impl PosedTwoHands {
             Side::Left => self.left.as_ref(),
             Side::Right => self.right.as_ref(),
         }
+    }
+
+    /// Writes the posed hands (left then right, untextured, named `left_hand` and
+    /// `right_hand`) as an OBJ file and, with `glb`, also as a glTF binary.
+    ///
+    /// # Errors
+    /// Unwritable files.
+    pub fn write(
+        &self,
+        models: &HandPair,
+        obj: &Path,
+        glb: Option<&Path>,
+    ) -> Result<(), MeshError> {
+        let names = ["left_hand", "right_hand"];
+        let hands: Vec<ExportHand> = Side::BOTH
+            .iter()
+            .zip(names)
+            .filter_map(|(&side, name)| {
+                let p = self.get(side)?;
+                let m = models.get(side);
+                Some(ExportHand {
+                    name,
+                    vertices: &p.vertices,
+                    faces: &m.faces,
+                    uv: m.uv.as_ref(),
+                    texture: None,
+                })
+            })
+            .collect();
+        write_obj(obj, &hands)?;
+        if let Some(glb) = glb {
+            write_glb(glb, &hands)?;
+        }
+        Ok(())
     }
 }
 
@@ -655,6 +690,25 @@ pub fn scene_from_interhand_json(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A one-hand scene writes an OBJ with only that hand and a GLB beside it.
+    #[test]
+    fn posed_hands_write_obj_and_glb() {
+        let models = crate::procedural_pair();
+        let posed = PosedTwoHands {
+            left: None,
+            right: Some(models.right.forward(&HandParams::mean_pose()).unwrap()),
+        };
+        let dir = std::env::temp_dir().join(format!("bitt-posed-write-{}", std::process::id()));
+        let (obj, glb) = (dir.join("h.obj"), dir.join("h.glb"));
+        posed.write(&models, &obj, Some(&glb)).unwrap();
+        let text = std::fs::read_to_string(&obj).unwrap();
+        assert!(text.contains("right_hand") && !text.contains("left_hand"));
+        let vertices = text.lines().filter(|l| l.starts_with("v ")).count();
+        assert_eq!(vertices, models.right.num_vertices());
+        assert!(std::fs::read(&glb).unwrap().starts_with(b"glTF"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     fn mano_json() -> serde_json::Value {
         let mut pose = vec![0.0; 48];

@@ -182,6 +182,10 @@ pub struct Btr {
     head2: TexelConv,
     #[module(skip)]
     bidirectional: bool,
+    /// Pools with the fused operation on flex ([`ConvImpl::Fused`]), burn's `max_pool1d`
+    /// otherwise.
+    #[module(skip)]
+    fused_pool: bool,
 }
 
 /// BTR's output: the full texel vectors of both hands, values in `(0, 1)`.
@@ -262,6 +266,7 @@ impl BtrConfig {
             head1: head(ch[0], self.head_channels),
             head2: head(self.head_channels, self.channels_out),
             bidirectional: self.bidirectional,
+            fused_pool: self.conv == ConvImpl::Fused,
         }
     }
 }
@@ -310,7 +315,14 @@ impl Btr {
         for level in &self.encoder {
             h = level.block2.forward(level.block1.forward(h));
             lengths.push(h.dims()[2]);
-            h = max_pool1d(h, MaxPoolOptions::new([2]).with_stride([2]));
+            h = match self
+                .fused_pool
+                .then(|| fused::pool::max_pool_half(&h))
+                .flatten()
+            {
+                Some(pooled) => pooled,
+                None => max_pool1d(h, MaxPoolOptions::new([2]).with_stride([2])),
+            };
             skips.push(h.clone());
         }
         for block in &self.middle {

@@ -26,4 +26,15 @@ pub enum SynthError {
     /// framed, a tensor that cannot be read back...).
     #[error("{0}")]
     Generate(String),
+    /// One scene of a set could not be generated.
+    #[error("generating scene {index} (seed {seed})")]
+    Scene {
+        /// Position of the scene in the set.
+        index: usize,
+        /// Its seed.
+        seed: u64,
+        /// Why.
+        #[source]
+        source: Box<SynthError>,
+    },
 }

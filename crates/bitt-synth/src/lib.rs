@@ -33,6 +33,7 @@ mod error;
 mod io;
 pub mod pose;
 pub mod render;
+mod set;
 mod sheet;
 pub mod stats;
 pub mod texture;
@@ -58,6 +59,7 @@ pub use pose::PoseFamily;
 pub use render::{
     HandRenderer, RenderedView, camera_frame_camera, textured_mesh, textured_mesh_with,
 };
+pub use set::{SceneSet, WrittenScene, write_scene_set};
 pub use sheet::{PANEL, contact_sheet};
 pub use stats::{TexelStats, scene_stats};
 pub use texture::{AppearancePatch, PatchKind, SkinDetail, TEXTURE_GUTTER, texture_layouts};

@@ -32,6 +32,43 @@ pub struct PlanarImage {
     pub data: Vec<f32>,
 }
 
+/// Mean and largest absolute difference of two images of one size, and each image's mean
+/// (over every channel value).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImageDifference {
+    /// Mean of `|a - b|`.
+    pub mean_abs_diff: f64,
+    /// Largest `|a - b|`.
+    pub max_abs_diff: f64,
+    /// Mean of `a`.
+    pub mean_a: f64,
+    /// Mean of `b`.
+    pub mean_b: f64,
+}
+
+impl ImageDifference {
+    /// The difference of `a` and `b`; `None` when their sizes differ.
+    pub fn between(a: &PlanarImage, b: &PlanarImage) -> Option<Self> {
+        if (a.width, a.height) != (b.width, b.height) {
+            return None;
+        }
+        let n = a.data.len().max(1) as f64;
+        let (sum, max) = a
+            .data
+            .iter()
+            .zip(&b.data)
+            .map(|(x, y)| f64::from((x - y).abs()))
+            .fold((0.0, 0.0f64), |(s, m), d| (s + d, m.max(d)));
+        let mean = |d: &[f32]| d.iter().map(|&x| f64::from(x)).sum::<f64>() / n;
+        Some(ImageDifference {
+            mean_abs_diff: sum / n,
+            max_abs_diff: max,
+            mean_a: mean(&a.data),
+            mean_b: mean(&b.data),
+        })
+    }
+}
+
 /// Checks an image array and converts it to interleaved `[H, W, 3]` integers with
 /// `round(x * max)` after clamping to `[0, 1]`.
 fn interleave<T>(
@@ -241,6 +278,24 @@ pub fn load_compact_texture(path: &Path, layout: &TextureLayout) -> Result<Vec<f
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The difference of two 1x2 images, and `None` for two sizes.
+    #[test]
+    fn image_difference() {
+        let image = |width, data: Vec<f32>| PlanarImage {
+            width,
+            height: 1,
+            data,
+        };
+        let a = image(2, vec![0.0, 1.0, 0.5, 0.5, 0.25, 0.75]);
+        let b = image(2, vec![0.5, 1.0, 0.5, 0.0, 0.25, 0.75]);
+        let d = ImageDifference::between(&a, &b).unwrap();
+        assert_eq!(d.mean_abs_diff, 1.0 / 6.0);
+        assert_eq!(d.max_abs_diff, 0.5);
+        assert_eq!(d.mean_a, 0.5);
+        assert_eq!(d.mean_b, 0.5);
+        assert_eq!(ImageDifference::between(&a, &image(3, vec![0.0; 9])), None);
+    }
     use bitt_testkit::Rng;
 
     use crate::test_util::temp_dir;

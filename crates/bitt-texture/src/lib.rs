@@ -22,7 +22,8 @@ pub use html::{
     load_html_uvs,
 };
 pub use image_io::{
-    PlanarImage, load_compact_texture, load_image, save_compact_texture, save_png8, save_png16,
+    ImageDifference, PlanarImage, load_compact_texture, load_image, save_compact_texture,
+    save_png8, save_png16,
 };
 pub use layout::{LayoutGather, TextureLayout};
 pub use pca::{

@@ -187,6 +187,16 @@ pub struct TrainConfig {
 }
 
 impl TrainConfig {
+    /// The synthetic scene generator's settings at this configuration's image and texture
+    /// sizes (the demo scene's; callers change the novel views, poses or mesh noise).
+    pub fn scene_config(&self) -> bitt_synth::SynthConfig {
+        bitt_synth::SynthConfig {
+            size: self.nets.image_size as u32,
+            texture_size: self.texture.resolution,
+            ..bitt_synth::SynthConfig::default()
+        }
+    }
+
     /// The named configuration.
     ///
     /// - `paper`: the paper's networks at 256 x 256, 700 iterations, 1024 x 1024 textures

@@ -49,6 +49,30 @@ pub enum BittError {
     /// From the synthetic generator.
     #[error(transparent)]
     Synth(#[from] bitt_synth::SynthError),
+    /// What was being done (an option and its file, a scene) when `source` went wrong.
+    #[error("{context}")]
+    Context {
+        /// What was being done.
+        context: String,
+        /// What went wrong.
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync + 'static>,
+    },
+}
+
+/// Says what was being done when an error happened ([`BittError::Context`]).
+pub(crate) trait WithContext<T> {
+    /// The error, if any, inside a [`BittError::Context`] of `context()`.
+    fn context_with(self, context: impl FnOnce() -> String) -> Result<T, BittError>;
+}
+
+impl<T, E: std::error::Error + Send + Sync + 'static> WithContext<T> for Result<T, E> {
+    fn context_with(self, context: impl FnOnce() -> String) -> Result<T, BittError> {
+        self.map_err(|e| BittError::Context {
+            context: context(),
+            source: Box::new(e),
+        })
+    }
 }
 
 impl BittError {

@@ -2,6 +2,7 @@
 //! meshes to relightable UV textures of both hands.
 //!
 //! - [`config`]: the trainer's configuration and the `paper` / `quick` / `tiny` presets.
+//! - [`config_files`]: the configuration files the commands take (training, refinement, fit).
 //! - [`assets`]: hand models, render meshes, texture layouts; one view's geometry.
 //! - [`demo`]: the built-in two-hand demo scene (procedural or any other hands).
 //! - [`input`]: cropping and resizing input images to the preset's size.
@@ -9,8 +10,10 @@
 //! - [`losses`]: the paper's loss (eq. 6-10).
 //! - [`optim`], [`checkpoint`], [`trainer`]: Adam, checkpoints, the per-scene trainer.
 //! - [`metrics`], [`evaluate`]: image and texture metrics, renders at other views and poses.
+//! - [`pair_metrics`]: two image files compared (`bitt metrics`): metrics, LPIPS inputs, report.
 //! - [`lpips`]: LPIPS-VGG with user-provided weights (unavailable without them);
 //!   [`lpips_convert`] writes its weights file from the torch checkpoints.
+//! - [`train_scene`]: a run's setup (fresh or resumed) and its results, for `train-scene`.
 //! - [`outputs`], [`run`]: the run folder (textures, renders, avatar, metrics, report);
 //!   [`run_folder`]: where a new run may go, its first files, a resumed run's checkpoints.
 //! - [`avatar_export`]: the avatar files: rigged `avatar.glb`, `avatar_static.glb`, OBJ.
@@ -19,24 +22,33 @@
 //! - [`viewer`]: the report's interactive 3D view of the avatar (three.js, embedded).
 //! - [`figure`]: `bitt render`'s figures (both hands, each alone, masks, unwrapped images,
 //!   a grid of orthographic views).
+//! - [`figure_inputs`]: what the figures are made of, read and checked (light, UV layouts,
+//!   images, procedural skin textures).
 //! - [`plot`]: the loss plot (`loss.png`: axes, decade ticks, legend, learning-rate steps).
 //! - [`hand_layer`]: the hand model as a differentiable burn function (both hands batched).
 //! - [`refine`]: mesh refinement of both hands against the photo through the renderer.
 //! - [`hand_priors`]: joint-angle, off-axis and penetration priors shared by `refine` and `fit`.
 //! - [`fit`]: both hands fitted to 2D keypoints (OpenPose, MediaPipe, plain JSON).
 //! - [`real`]: real data (an image + annotation pickle, InterHand2.6M scenes), real runs.
+//! - [`backend_check`], [`nets_bench`], [`gpu_check`]: a fixed computation to compare
+//!   backends, the network benches, and `bitt gpu-check` (every GPU check in one report);
+//!   [`net_shapes`]: the networks' parameter counts and shapes (`bitt nets`).
 
 pub mod assets;
 pub mod avatar_export;
+pub mod backend_check;
 pub mod baselines;
 pub mod benchmark;
 pub mod checkpoint;
 pub mod config;
+pub mod config_files;
 pub mod demo;
 mod error;
 pub mod evaluate;
 pub mod figure;
+pub mod figure_inputs;
 pub mod fit;
+pub mod gpu_check;
 pub mod hand_layer;
 pub mod hand_priors;
 pub mod input;
@@ -44,8 +56,11 @@ pub mod losses;
 pub mod lpips;
 pub mod lpips_convert;
 pub mod metrics;
+pub mod net_shapes;
+pub mod nets_bench;
 pub mod optim;
 pub mod outputs;
+pub mod pair_metrics;
 pub mod pipeline;
 pub mod plot;
 pub mod real;
@@ -53,6 +68,7 @@ pub mod refine;
 pub mod run;
 pub mod run_folder;
 pub mod saved;
+pub mod train_scene;
 pub mod trainer;
 pub mod viewer;
 

@@ -20,11 +20,9 @@ fn devices() -> Vec<(&'static str, Device)> {
 fn tiny() -> (TrainConfig, SynthScene, TexturePca) {
     let config = TrainConfig::preset(Preset::Tiny);
     let synth = SynthConfig {
-        size: config.nets.image_size as u32,
-        texture_size: config.texture.resolution,
         novel_views: 1,
         novel_poses: 1,
-        ..SynthConfig::default()
+        ..config.scene_config()
     };
     let scene = generate_scene(&synth, 7, &Device::flex()).expect("scene");
     let pca = texture_prior(&config, None, &Device::flex()).expect("pca");

@@ -9,6 +9,7 @@ use pulp::Arch;
 use rayon::prelude::*;
 
 use super::gemm::{MatMut, MatRef, matmul};
+use super::vectorized::vectorized;
 
 /// Sizes of a stride-1, zero-padded ("same") 1-D convolution over a batch.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -468,7 +469,7 @@ pub(crate) fn norm_silu_forward(
     let moments: Vec<(f64, f64)> = z
         .par_chunks_exact(d.len)
         .map(|row| {
-            arch.dispatch(|| {
+            vectorized!(arch, <'a> (row: &'a [f32] = row) -> (f64, f64) {
                 row.chunks(BLOCK).fold((0.0, 0.0), |(a, b), block| {
                     let (s1, s2) = sums(block, block);
                     (a + f64::from(s1), b + f64::from(s2))
@@ -508,7 +509,9 @@ pub(crate) fn norm_silu_forward(
         .enumerate()
         .for_each(|(row, (yr, zr))| {
             let (s, h) = (maps.scale[row], maps.shift[row]);
-            arch.dispatch(|| {
+            vectorized!(arch, <'a> (
+                yr: &'a mut [f32] = yr, zr: &'a [f32] = zr, s: f32 = s, h: f32 = h,
+            ) -> () {
                 for (y, &z) in yr.iter_mut().zip(zr) {
                     let a = z * s + h;
                     *y = a * sigmoid(a);
@@ -581,7 +584,9 @@ pub(crate) fn norm_silu_backward_in_place(
         .enumerate()
         .map(|(row, (out, zr))| {
             let (s, h) = (maps.scale[row], maps.shift[row]);
-            arch.dispatch(|| {
+            vectorized!(arch, <'a> (
+                out: &'a mut [f32] = out, zr: &'a [f32] = zr, s: f32 = s, h: f32 = h,
+            ) -> (f64, f64) {
                 let mut total = (0.0f64, 0.0f64);
                 for (o, zb) in out.chunks_mut(BLOCK).zip(zr.chunks(BLOCK)) {
                     for (o, &z) in o.iter_mut().zip(zb) {
@@ -632,7 +637,9 @@ pub(crate) fn norm_silu_backward_in_place(
         .for_each(|(row, (o, zr))| {
             let (p, q, r) = coef[row];
             let (p, q, r) = (p as f32, q as f32, r as f32);
-            arch.dispatch(|| {
+            vectorized!(arch, <'a> (
+                o: &'a mut [f32] = o, zr: &'a [f32] = zr, p: f32 = p, q: f32 = q, r: f32 = r,
+            ) -> () {
                 for (o, &z) in o.iter_mut().zip(zr) {
                     *o = p * *o + q * z + r;
                 }

@@ -14,6 +14,7 @@ use pulp::Arch;
 use rayon::prelude::*;
 
 use super::gemm::{MatMut, MatRef, matmul};
+use super::vectorized::vectorized;
 
 /// Sizes of a 2-D convolution with symmetric zero padding and no dilation or groups.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -629,7 +630,9 @@ pub(crate) fn post_forward(
             .map(|r| {
                 let n = r.len() as f64;
                 let k = r[0];
-                let (s1, s2) = arch.dispatch(|| sum_dev(r, k));
+                let (s1, s2) = vectorized!(arch, <'a> (r: &'a [f32] = r, k: f32 = k) -> (f64, f64) {
+                    sum_dev(r, k)
+                });
                 let d1 = s1 / n;
                 let var = (s2 / n - d1 * d1).max(0.0);
                 (
@@ -647,7 +650,13 @@ pub(crate) fn post_forward(
         .enumerate()
         .for_each(|(row, (yr, zr))| {
             let (s, h) = stats.map(row, gamma, beta, &d);
-            arch.dispatch(|| map_row(yr, zr, s, h, d.act));
+            let act = d.act;
+            vectorized!(arch, <'a> (
+                yr: &'a mut [f32] = yr, zr: &'a [f32] = zr, s: f32 = s, h: f32 = h,
+                act: Activation = act,
+            ) -> () {
+                map_row(yr, zr, s, h, act)
+            });
         });
     (y, stats)
 }
@@ -685,16 +694,26 @@ pub(crate) fn post_backward_in_place(
         .enumerate()
         .map(|(row, (g, zr))| {
             let (s, h) = stats.map(row, gamma, beta, &d);
-            arch.dispatch(|| {
-                grad_row(g, zr, s, h, d.act);
-                if d.norm.is_none() {
+            let (act, normed) = (d.act, d.norm.is_some());
+            let (m, r) = (stats.mean[row], stats.rstd[row]);
+            // gamma is empty without a norm.
+            let p = if normed {
+                r * gamma[row % d.channels]
+            } else {
+                0.0
+            };
+            vectorized!(arch, <'a> (
+                g: &'a mut [f32] = g, zr: &'a [f32] = zr, s: f32 = s, h: f32 = h,
+                act: Activation = act, normed: bool = normed, m: f32 = m, r: f32 = r, p: f32 = p,
+                n: f64 = n,
+            ) -> (f64, f64, f64) {
+                grad_row(g, zr, s, h, act);
+                if !normed {
                     let (total, _) = dot_dev(g, zr, 0.0);
                     return (0.0, 0.0, total);
                 }
-                let (m, r) = (stats.mean[row], stats.rstd[row]);
                 let (sa, sgd) = dot_dev(g, zr, m);
                 let sb = f64::from(r) * sgd;
-                let p = r * gamma[row % d.channels];
                 let (ma, mb) = ((sa / n) as f32, (sb / n) as f32);
                 // dz = p (ga - ma - (z - m) r mb) = p ga + q z + c.
                 let q = -p * r * mb;

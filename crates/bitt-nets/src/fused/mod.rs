@@ -23,6 +23,8 @@ pub(crate) mod conv2d;
 mod gemm;
 pub(crate) mod kernels;
 pub(crate) mod kernels2d;
+pub(crate) mod pool;
+mod vectorized;
 
 use std::sync::Arc;
 

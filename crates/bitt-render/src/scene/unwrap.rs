@@ -88,16 +88,17 @@ impl TexelSurface {
     /// Wrong vertex count or non-finite vertices.
     pub fn points(&self, vertices: &[DVec3]) -> Result<Vec<DVec3>, RenderError> {
         self.check(vertices)?;
-        Ok(self
-            .texel_faces
-            .iter()
-            .map(|&(f, b)| {
-                let t = self.mesh_faces[f as usize];
-                (0..3)
-                    .map(|k| vertices[t[k] as usize] * f64::from(b[k]))
-                    .sum()
-            })
-            .collect())
+        Ok(self.at_texels(vertices).collect())
+    }
+
+    /// Per-vertex values interpolated at every texel with its face's barycentrics.
+    fn at_texels<'a>(&'a self, values: &'a [DVec3]) -> impl Iterator<Item = DVec3> + 'a {
+        self.texel_faces.iter().map(move |&(f, b)| {
+            let t = self.mesh_faces[f as usize];
+            (0..3)
+                .map(|k| values[t[k] as usize] * f64::from(b[k]))
+                .sum()
+        })
     }
 
     /// Unit surface normals at the texels (interpolated area-weighted vertex normals).
@@ -106,25 +107,8 @@ impl TexelSurface {
     /// Wrong vertex count or non-finite vertices.
     pub fn normals(&self, vertices: &[DVec3]) -> Result<Vec<DVec3>, RenderError> {
         self.check(vertices)?;
-        let mut vn = vec![DVec3::ZERO; vertices.len()];
-        for t in &self.mesh_faces {
-            let [a, b, c] = t.map(|i| vertices[i as usize]);
-            let n = (b - a).cross(c - a);
-            for &i in t {
-                vn[i as usize] += n;
-            }
-        }
-        Ok(self
-            .texel_faces
-            .iter()
-            .map(|&(f, b)| {
-                let t = self.mesh_faces[f as usize];
-                (0..3)
-                    .map(|k| vn[t[k] as usize].normalize_or_zero() * f64::from(b[k]))
-                    .sum::<DVec3>()
-                    .normalize_or_zero()
-            })
-            .collect())
+        let vn = bitt_mesh::export::vertex_normals(vertices, &self.mesh_faces);
+        Ok(self.at_texels(&vn).map(DVec3::normalize_or_zero).collect())
     }
 }
 

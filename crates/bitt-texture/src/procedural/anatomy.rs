@@ -125,17 +125,12 @@ fn aligned_faces(layout: &TextureLayout, hand: &HandModel) -> Result<Vec<[u32; 3
     Ok(out)
 }
 
-/// Area-weighted vertex normals.
+/// Area-weighted vertex normals (`+Y` where undefined).
 fn vertex_normals(vertices: &[DVec3], faces: &[[u32; 3]]) -> Vec<DVec3> {
-    let mut normals = vec![DVec3::ZERO; vertices.len()];
-    for f in faces {
-        let [a, b, c] = f.map(|i| vertices[i as usize]);
-        let n = (b - a).cross(c - a);
-        for i in f {
-            normals[*i as usize] += n;
-        }
-    }
-    normals.iter().map(|n| n.normalize_or(DVec3::Y)).collect()
+    bitt_mesh::export::vertex_normals(vertices, faces)
+        .into_iter()
+        .map(|n| if n == DVec3::ZERO { DVec3::Y } else { n })
+        .collect()
 }
 
 /// Mean edge of a texel on the surface: `sqrt(surface area / UV area) / resolution`.

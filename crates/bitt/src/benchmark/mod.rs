@@ -12,7 +12,8 @@
 //! Files: `methods.rs` runs the methods on one scene and scores them, `aggregate.rs`
 //! averages scene results and pairs methods scene by scene, `markdown.rs` writes
 //! `results.md` with the claims, `folder.rs` keeps an evaluation's folder (result files per
-//! scene and setting, shards, resume, merging).
+//! scene and setting, shards, resume, merging), `scenes.rs` runs an evaluation's scenes one
+//! after another (synthetic or InterHand2.6M, this shard's, skipping finished ones).
 
 use std::collections::BTreeMap;
 
@@ -27,6 +28,7 @@ mod aggregate;
 mod folder;
 mod markdown;
 mod methods;
+mod scenes;
 
 pub use aggregate::{MeanMetrics, MethodSummary, Paired, Summary, TexelStatsMean, summarize};
 pub use folder::{
@@ -35,6 +37,7 @@ pub use folder::{
 };
 pub use markdown::{claims, results_markdown};
 pub use methods::{ContactSheets, SceneSheets, SheetImages, evaluate_real_scene, evaluate_scene};
+pub use scenes::{EvalObserver, EvalRun, InterHandScenes, evaluate_interhand, evaluate_synthetic};
 
 /// A method of the comparison (Tables 1 and 4).
 #[derive(

@@ -1,7 +1,7 @@
 //! The keypoint fit on synthetic scenes, where the true joints and camera are known: noisy
 //! keypoints from the true 2D joints (`keypoints_2d` of `scene.json`) and the fit's scores.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use bitt_mesh::glam::DVec2;
 use bitt_mesh::keypoints::{NUM_KEYPOINTS, TwoHandKeypoints};
@@ -12,6 +12,7 @@ use bitt_texture::procedural::noise::SplitMix64;
 use super::{KeypointFit, keypoint_overlay};
 use crate::BittError;
 use crate::assets::HandAssets;
+use crate::error::WithContext;
 use crate::hand_priors::{FLEXION_RANGE, flexion_angles, flexion_axes};
 use crate::run_folder::FitOutput;
 
@@ -232,6 +233,44 @@ pub struct SceneFitResult {
     pub hands: Vec<super::HandFitReport>,
 }
 
+/// Reads each synthetic scene folder ([`SynthScene::read`]) and fits it
+/// ([`fit_synthetic_scene`], named by its path, silently); `on_scene` sees each result when
+/// it is done.
+///
+/// # Errors
+/// The first folder that cannot be read (in a context `--scene DIR`) or fitted (`fitting
+/// --scene DIR`).
+pub fn fit_synthetic_scenes(
+    dirs: &[PathBuf],
+    settings: &SyntheticFitSettings,
+    config: &super::FitConfig,
+    device: &burn::tensor::Device,
+    mut on_scene: impl FnMut(&Path, &SceneFitResult),
+) -> Result<Vec<SceneFitResult>, BittError> {
+    let mut results = Vec::new();
+    for dir in dirs {
+        let scene = SynthScene::read(dir).context_with(|| format!("--scene {}", dir.display()))?;
+        let name = dir.display().to_string();
+        let r = fit_synthetic_scene(&scene, name, settings, config, device, &mut super::Quiet)
+            .context_with(|| format!("fitting --scene {}", dir.display()))?;
+        on_scene(dir, &r);
+        results.push(r);
+    }
+    Ok(results)
+}
+
+/// Writes [`fit_eval_summary`] as `<out>/fit-eval.json` (creating `out`) and returns the
+/// file's path.
+///
+/// # Errors
+/// An unwritable folder or file.
+pub fn write_fit_eval(out: &Path, summary: &serde_json::Value) -> Result<PathBuf, BittError> {
+    std::fs::create_dir_all(out).context_with(|| format!("creating {}", out.display()))?;
+    let path = out.join("fit-eval.json");
+    crate::outputs::write_json(&path, summary)?;
+    Ok(path)
+}
+
 /// How the synthetic keypoints of [`fit_synthetic_scene`] are made and seen.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct SyntheticFitSettings {
@@ -315,4 +354,56 @@ pub fn fit_eval_summary(
         "config": config,
         "per_scene": results,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn settings() -> SyntheticFitSettings {
+        SyntheticFitSettings {
+            noise_px: 2.0,
+            drop: 0.1,
+            seed: 0,
+            default_intrinsics: false,
+        }
+    }
+
+    /// A folder that holds no scene stops the loop with an error naming it as `--scene DIR`
+    /// (its cause below), before anything is fitted.
+    #[test]
+    fn unreadable_scene_is_named() {
+        let dir = std::env::temp_dir().join(format!("bitt-fit-noscene-{}", std::process::id()));
+        let config = super::super::FitConfig::default();
+        let mut seen = 0;
+        let err = fit_synthetic_scenes(
+            std::slice::from_ref(&dir),
+            &settings(),
+            &config,
+            &burn::tensor::Device::flex(),
+            |_, _| seen += 1,
+        )
+        .unwrap_err();
+        assert_eq!(err.to_string(), format!("--scene {}", dir.display()));
+        assert!(std::error::Error::source(&err).is_some());
+        assert_eq!(seen, 0);
+    }
+
+    /// The summary goes to `<out>/fit-eval.json`, the folder created; a folder that cannot
+    /// be created is an error `creating DIR`.
+    #[test]
+    fn fit_eval_file() {
+        let root = std::env::temp_dir().join(format!("bitt-fit-eval-{}", std::process::id()));
+        let out = root.join("a/b");
+        let summary = fit_eval_summary(&[], &settings(), &super::super::FitConfig::default());
+        let path = write_fit_eval(&out, &summary).unwrap();
+        assert_eq!(path, out.join("fit-eval.json"));
+        let back: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        assert_eq!(back["scenes"], 0);
+        let blocked = path.join("x");
+        let err = write_fit_eval(&blocked, &summary).unwrap_err();
+        assert_eq!(err.to_string(), format!("creating {}", blocked.display()));
+        std::fs::remove_dir_all(&root).unwrap();
+    }
 }

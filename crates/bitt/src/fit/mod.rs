@@ -43,7 +43,8 @@ use crate::optim::Adam;
 
 pub use eval::{
     FitScores, SceneFitResult, SyntheticFitSettings, SyntheticKeypoints, fit_eval_summary,
-    fit_synthetic_scene, record_synthetic_fit, score_fit, synthetic_keypoints,
+    fit_synthetic_scene, fit_synthetic_scenes, record_synthetic_fit, score_fit,
+    synthetic_keypoints, write_fit_eval,
 };
 pub use jobs::{
     FIT_JSON, KeypointSource, PhotoFit, UNMIRRORED_IMAGE, check_fit_out, fit_photo,

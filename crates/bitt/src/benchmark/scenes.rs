@@ -1,0 +1,251 @@
+//! An evaluation's scenes one after another: the synthetic benchmark's seeds and mesh
+//! settings ([`evaluate_synthetic`]) or one InterHand2.6M scene per capture
+//! ([`evaluate_interhand`]), this shard's only, each skipped when its result is already in
+//! the folder and written there when done.
+
+use std::path::Path;
+
+use bitt_mesh::interhand::{InterHandDataset, InterHandSelection};
+use bitt_synth::{MeshNoise, SynthConfig};
+use bitt_texture::FitProgress;
+use burn::tensor::Device;
+
+use super::folder::{
+    interhand_scene_id, pending, result_path, shard_seeds, trainings_per_scene, write_scene,
+};
+use super::methods::{evaluate_real_scene, evaluate_scene};
+use super::{MeshSetting, Method};
+use crate::BittError;
+use crate::baselines::BaselineConfig;
+use crate::config::TrainConfig;
+use crate::error::WithContext;
+use crate::lpips::LpipsVgg;
+use crate::real::{HandSource, PriorSource, interhand_views, load_models, real_trainer};
+use crate::run::texture_prior_with_progress;
+use crate::trainer::Observer;
+
+/// What an evaluation tells on the way; its trainings report each iteration through
+/// [`Observer`].
+pub trait EvalObserver: Observer {
+    /// A line for the user.
+    fn say(&mut self, line: &str);
+    /// The work ahead: `iterations` BiTT iterations in all.
+    fn plan(&mut self, iterations: usize);
+    /// A scene starts; `label` names it.
+    fn scene(&mut self, label: String);
+    /// A progress display for fitting the procedural texture PCA.
+    fn pca(&mut self) -> Box<dyn FitProgress>;
+}
+
+/// What every scene of an evaluation shares.
+#[derive(Debug, Clone, Copy)]
+pub struct EvalRun<'a> {
+    /// The evaluation folder (`prepare_folder` done).
+    pub out: &'a Path,
+    /// Cache of generated scenes and fitted texture PCAs.
+    pub cache: &'a Path,
+    /// Every BiTT training's configuration.
+    pub config: &'a TrainConfig,
+    /// The baselines' configuration.
+    pub baseline: &'a BaselineConfig,
+    /// The methods.
+    pub methods: &'a [Method],
+    /// The mesh settings.
+    pub settings: &'a [MeshSetting],
+    /// LPIPS-VGG, when its weights are there.
+    pub lpips: Option<&'a LpipsVgg>,
+    /// This shard `(i, N)`: scene `k` belongs to shard `k % N`.
+    pub shard: (usize, usize),
+}
+
+/// Evaluates the first `scenes` synthetic benchmark scenes (this shard's, in each mesh
+/// setting) whose results are not in the folder yet, and writes each result.
+///
+/// # Errors
+/// Generating a scene, training or scoring a method, or writing a result (naming the scene).
+pub fn evaluate_synthetic(
+    run: &EvalRun<'_>,
+    scenes: usize,
+    device: &Device,
+    observer: &mut dyn EvalObserver,
+) -> Result<(), BittError> {
+    let (config, host) = (run.config, device.clone().inner());
+    let seeds = shard_seeds(scenes, run.shard);
+    let todo = pending(run.out, &seeds, run.settings);
+    let skipped = seeds.len() * run.settings.len() - todo.len();
+    if skipped > 0 {
+        observer.say(&format!(
+            "{skipped} scene result(s) already in {}: skipped",
+            run.out.display()
+        ));
+    }
+    let trainings = trainings_per_scene(run.methods, config);
+    observer.plan(todo.len() * trainings * config.iterations);
+    observer.say(&format!(
+        "evaluating {} scene/setting pair(s), {} method(s), preset {} ({} iterations per BiTT training)",
+        todo.len(),
+        run.methods.len(),
+        config.preset,
+        config.iterations
+    ));
+    let progress = observer.pca();
+    let pca = texture_prior_with_progress(config, Some(run.cache), &host, progress.as_ref())?;
+    for (k, &(seed, setting)) in todo.iter().enumerate() {
+        let synth = SynthConfig {
+            mesh_noise: (setting == MeshSetting::NoisyMesh).then(MeshNoise::default),
+            ..config.scene_config()
+        };
+        let scene = bitt_synth::cached_scene(&synth, seed, &run.cache.join("scenes"), &host)
+            .context_with(|| format!("generating scene {seed:#x}"))?;
+        observer.scene(format!(
+            "[{}/{}] {seed:016x} {}",
+            k + 1,
+            todo.len(),
+            setting.key()
+        ));
+        let (result, sheets) = evaluate_scene(
+            &scene,
+            setting,
+            config,
+            run.baseline,
+            &pca,
+            run.methods,
+            run.lpips,
+            device,
+            &mut *observer,
+        )
+        .context_with(|| format!("scene {seed:#x} ({})", setting.key()))?;
+        write_scene(
+            run.out,
+            &result,
+            &scene.train.image,
+            &sheets,
+            config.nets.image_size,
+        )?;
+    }
+    observer.say("");
+    Ok(())
+}
+
+/// The InterHand2.6M scenes of an evaluation: the dataset, its split, the hands and texture
+/// prior, and how many captures (`None`: all).
+#[derive(Debug)]
+pub struct InterHandScenes<'a> {
+    /// The dataset's root.
+    pub root: &'a Path,
+    /// Its split.
+    pub split: &'a str,
+    /// The hand models.
+    pub hands: HandSource,
+    /// The texture prior.
+    pub prior: PriorSource,
+    /// How many captures with a usable scene (`None`: every one).
+    pub scenes: Option<usize>,
+}
+
+/// Evaluates one InterHand2.6M scene per capture (selected as `train-scene --interhand`
+/// does; annotated meshes only, Table 1a), this shard's, skipping those with a result.
+///
+/// # Errors
+/// A mesh setting other than the annotated meshes, an unreadable dataset, no capture with a
+/// usable scene, or training, scoring or writing a scene (naming the capture).
+pub fn evaluate_interhand(
+    run: &EvalRun<'_>,
+    data: &InterHandScenes<'_>,
+    device: &Device,
+    observer: &mut dyn EvalObserver,
+) -> Result<(), BittError> {
+    if !run.settings.contains(&MeshSetting::GtMesh) {
+        return Err(BittError::Invalid(
+            "--dataset interhand evaluates with the annotated meshes only (Table 1a); the \
+             setting without them needs a mesh estimator such as IntagHand"
+                .into(),
+        ));
+    }
+    let (root, split) = (data.root, data.split);
+    let models = load_models(&data.hands, &data.prior)?;
+    observer.say(&format!(
+        "reading InterHand2.6M {split} annotations below {}",
+        root.display()
+    ));
+    let dataset = InterHandDataset::open(root, split)?;
+    observer.say(&format!("InterHand2.6M {split}: {}", dataset.counts));
+    let captures = dataset.captures();
+    let wanted = data.scenes.unwrap_or(captures.len());
+    let (shard, shards) = run.shard;
+    let size = run.config.nets.image_size;
+    let trainings = trainings_per_scene(run.methods, run.config);
+    observer.plan(wanted.min(captures.len()).div_ceil(shards) * trainings * run.config.iterations);
+    let mut taken = 0;
+    for capture in captures {
+        if taken == wanted {
+            break;
+        }
+        let selection = InterHandSelection {
+            capture: Some(capture),
+            ..InterHandSelection::default()
+        };
+        let scene = match dataset.select(&selection) {
+            Ok(s) => s,
+            Err(err) => {
+                observer.say(&format!(
+                    "capture {capture}: no usable scene ({err}); skipped"
+                ));
+                continue;
+            }
+        };
+        let k = taken;
+        taken += 1;
+        if k % shards != shard {
+            continue;
+        }
+        let (frame, camera) = (scene.train.entry.frame_idx, &scene.train.entry.camera);
+        let id = interhand_scene_id(split, capture, frame, camera);
+        let path = result_path(run.out, MeshSetting::GtMesh, id);
+        if path.is_file() {
+            observer.say(&format!(
+                "capture {capture}: result exists ({}); skipped",
+                path.display()
+            ));
+            continue;
+        }
+        let views = interhand_views(&scene, &models, size)
+            .context_with(|| format!("capture {capture}: preparing its views"))?;
+        observer.scene(format!(
+            "[{}] capture {capture} frame {frame} cam {camera}",
+            k + 1
+        ));
+        let make = |cfg: &TrainConfig| {
+            real_trainer(
+                &views.train.image,
+                &views.train.hands,
+                models.clone(),
+                &data.prior,
+                cfg.clone(),
+                Some(run.cache),
+                device,
+            )
+        };
+        let (result, sheets) = evaluate_real_scene(
+            &views,
+            id,
+            &make,
+            run.config,
+            run.baseline,
+            run.methods,
+            run.lpips,
+            device,
+            &mut *observer,
+        )
+        .context_with(|| format!("InterHand2.6M capture {capture}"))?;
+        write_scene(run.out, &result, &views.train.image, &sheets, size)?;
+    }
+    observer.say("");
+    if taken == 0 {
+        return Err(BittError::Invalid(format!(
+            "no capture under {} has a usable scene",
+            root.display()
+        )));
+    }
+    Ok(())
+}
