@@ -6,9 +6,9 @@ use std::path::Path;
 
 use bitt::TrainConfig;
 use bitt::real::{
-    HandSource, PriorSource, REFERENCE_HAND_BOX_RATIO, RealAvatar, RealInput, annotation_pose,
-    annotation_setup, hands_box, interhand_setup, interhand_views, orbit_hands, parse_pose_family,
-    procedural_pose, render_textures, score_real,
+    HandSource, PriorSource, REFERENCE_HAND_BOX_RATIO, RealAvatar, RealInput, RealRunSettings,
+    annotation_pose, annotation_setup, hands_box, interhand_setup, interhand_views, orbit_hands,
+    parse_pose_family, procedural_pose, render_textures, score_real,
 };
 use bitt::trainer::Silent;
 use bitt_mesh::glam::{DVec2, DVec3};
@@ -199,12 +199,12 @@ fn interhand_scene_trains_and_scores_its_novel_views() {
     let mut setup = interhand_setup(
         &scene,
         &ds.paths,
-        &HandSource::Procedural,
-        &PriorSource::Procedural,
-        tiny(2),
-        None,
-        None,
-        &device,
+        RealRunSettings::new(
+            &HandSource::Procedural,
+            &PriorSource::Procedural,
+            tiny(2),
+            &device,
+        ),
     )
     .unwrap();
     setup.trainer.train(None, &mut Silent).unwrap();
@@ -251,8 +251,12 @@ fn annotation_run_trains_resumes_and_renders_in_other_poses() {
     let device = Device::flex().autodiff();
     let run = dir.join("run");
     let (hands, prior) = (HandSource::Procedural, PriorSource::Procedural);
-    let mut setup =
-        annotation_setup(&img, &pkl, &hands, &prior, tiny(3), None, None, &device).unwrap();
+    let mut setup = annotation_setup(
+        &img,
+        &pkl,
+        RealRunSettings::new(&hands, &prior, tiny(3), &device),
+    )
+    .unwrap();
     assert_eq!(setup.trainer.view.image.dims(), [1, 3, 32, 32]);
     // Both hands are seen (32 x 32 pixels cover few of the 128² layout's texels).
     let [lv, rv] = setup.trainer.view.visible_fraction();
@@ -266,8 +270,12 @@ fn annotation_run_trains_resumes_and_renders_in_other_poses() {
     setup.input.write(&run, &setup.scene).unwrap();
     // Train 2 iterations, checkpoint, then resume from the folder for the third: the same
     // result as 3 straight iterations.
-    let mut straight =
-        annotation_setup(&img, &pkl, &hands, &prior, tiny(3), None, None, &device).unwrap();
+    let mut straight = annotation_setup(
+        &img,
+        &pkl,
+        RealRunSettings::new(&hands, &prior, tiny(3), &device),
+    )
+    .unwrap();
     straight.trainer.train(None, &mut Silent).unwrap();
     setup.trainer.config.iterations = 2;
     let ckpt = run.join("checkpoint.safetensors");
@@ -340,7 +348,12 @@ fn bad_annotation_inputs_are_named() {
     let device = Device::flex().autodiff();
     let (hands, prior) = (HandSource::Procedural, PriorSource::Procedural);
     let setup = |img: &Path, pkl: &Path| {
-        annotation_setup(img, pkl, &hands, &prior, tiny(1), None, None, &device).map(|_| ())
+        annotation_setup(
+            img,
+            pkl,
+            RealRunSettings::new(&hands, &prior, tiny(1), &device),
+        )
+        .map(|_| ())
     };
     // Wrong image size.
     let small = dir.join("small.png");
@@ -378,17 +391,13 @@ fn bad_annotation_inputs_are_named() {
     let e = err(setup(&img, &dir.join("none.pkl")));
     assert!(e.contains("none.pkl"), "{e}");
     // Hands and prior that do not go together.
+    let html = PriorSource::Html {
+        dir: dir.join("html"),
+    };
     let e = err(annotation_setup(
         &img,
         &pkl,
-        &HandSource::Procedural,
-        &PriorSource::Html {
-            dir: dir.join("html"),
-        },
-        tiny(1),
-        None,
-        None,
-        &device,
+        RealRunSettings::new(&HandSource::Procedural, &html, tiny(1), &device),
     ));
     assert!(e.contains("MANO"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
@@ -412,12 +421,12 @@ fn demo_frame_trains_with_procedural_hands_if_present() {
     let mut setup = annotation_setup(
         &demo.join("01.jpg"),
         &demo.join("01.pkl"),
-        &HandSource::Procedural,
-        &PriorSource::Procedural,
-        tiny(2),
-        None,
-        None,
-        &device,
+        RealRunSettings::new(
+            &HandSource::Procedural,
+            &PriorSource::Procedural,
+            tiny(2),
+            &device,
+        ),
     )
     .unwrap();
     setup.trainer.train(None, &mut Silent).unwrap();
@@ -494,8 +503,12 @@ fn mano_and_html_folders_train_with_the_html_prior() {
         HandSource::Mano { dir: mano.clone() },
         PriorSource::Html { dir: html.clone() },
     );
-    let mut setup =
-        annotation_setup(&img, &pkl, &hands, &prior, tiny(2), None, None, &device).unwrap();
+    let mut setup = annotation_setup(
+        &img,
+        &pkl,
+        RealRunSettings::new(&hands, &prior, tiny(2), &device),
+    )
+    .unwrap();
     assert_eq!(setup.trainer.config.nets.html.coefficients_per_hand, 12);
     assert_eq!(setup.trainer.config.texture.components, 12);
     setup.trainer.config.validate().unwrap();
@@ -522,12 +535,7 @@ fn mano_and_html_folders_train_with_the_html_prior() {
     let e = err(annotation_setup(
         &img,
         &pkl,
-        &hands,
-        &PriorSource::Procedural,
-        tiny(1),
-        None,
-        None,
-        &device,
+        RealRunSettings::new(&hands, &PriorSource::Procedural, tiny(1), &device),
     ));
     assert!(e.contains("HTML"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);

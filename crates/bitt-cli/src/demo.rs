@@ -5,8 +5,7 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
-use bitt::demo::demo_scene;
-use bitt_mesh::procedural_pair;
+use bitt::demo::write_demo;
 
 use crate::pose_hands::report_boxes;
 
@@ -20,18 +19,13 @@ pub struct DemoArgs {
 
 /// `bitt demo`.
 pub fn run(args: &DemoArgs) -> Result<()> {
-    let models = procedural_pair();
-    let scene = demo_scene(&models);
-    let posed = scene.pose_in_camera(&models)?;
     std::fs::create_dir_all(&args.out)?;
-    let obj = args.out.join("hands.obj");
-    let glb = args.out.join("hands.glb");
-    posed.write(&models, &obj, Some(&glb))?;
-    bitt_mesh::export::write_atomically(
-        &args.out.join("scene.json"),
-        serde_json::to_string_pretty(&scene)?.as_bytes(),
-    )?;
+    let (scene, posed) = write_demo(&args.out)?;
     report_boxes(&scene, &posed, false);
-    println!("wrote {}, {} and scene.json", obj.display(), glb.display());
+    println!(
+        "wrote {}, {} and scene.json",
+        args.out.join("hands.obj").display(),
+        args.out.join("hands.glb").display()
+    );
     Ok(())
 }

@@ -1,23 +1,18 @@
 //! `bitt eval` and `bitt eval-merge`: the paper's evaluation protocol on the synthetic
 //! benchmark (crate `bitt`, module `benchmark`), resumable and shardable.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use bitt::baselines::BaselineConfig;
 use bitt::benchmark::{
-    EvalObserver, EvalPlan, EvalRun, InterHandScenes, MeshSetting, Method, evaluate_interhand,
-    evaluate_synthetic, parse_shard, prepare_folder,
+    EvalRun, EvalSource, Evaluation, MeshSetting, Method, parse_scenes, parse_shard, run_evaluation,
 };
-use bitt::lpips::LpipsVgg;
-use bitt::real::sources;
-use bitt::{Observer, Progress};
-use bitt_synth::BENCHMARK_SCENES;
+use bitt::progress::EvalBar;
 
 use crate::args::TrainingArgs;
 use crate::device::DeviceName;
-use crate::progress::ProgressLine;
 
 /// Where the evaluated scenes come from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -104,64 +99,13 @@ pub struct MergeArgs {
     pub dirs: Vec<PathBuf>,
 }
 
-/// Progress over the whole evaluation (`crate::progress`): BiTT iterations are the unit of
-/// work.
-struct EvalBar {
-    line: ProgressLine,
-    done: usize,
-    total: usize,
-    label: String,
-}
-
-impl Observer for EvalBar {
-    fn iteration(&mut self, p: &Progress) {
-        self.done += 1;
-        let per = self.line.elapsed() / self.done.max(1) as f64;
-        let eta = per * self.total.saturating_sub(self.done) as f64;
-        let label = format!(
-            "{} it {}/{} loss {:.4} | eval ",
-            self.label, p.iteration, p.iterations, p.terms.total
-        );
-        let text = format!("ETA {:.0} min", eta / 60.0);
-        self.line.show(&label, self.done, self.total, &text);
-    }
-    fn recovered(&mut self, iteration: usize, message: &str) {
-        eprintln!("\nrecovered at iteration {iteration}: {message}");
-    }
-}
-
-impl EvalObserver for EvalBar {
-    fn say(&mut self, line: &str) {
-        eprintln!("{line}");
-    }
-
-    fn plan(&mut self, iterations: usize) {
-        self.total = iterations;
-    }
-
-    fn scene(&mut self, label: String) {
-        self.label = label;
-    }
-
-    fn pca(&mut self) -> Box<dyn bitt_texture::FitProgress> {
-        Box::new(crate::progress::PcaFitBar::new())
-    }
-}
-
 /// `bitt eval`.
 pub fn run(args: &EvalArgs) -> Result<()> {
     let started = Instant::now();
-    let scenes = match args.scenes.as_str() {
-        "all" => BENCHMARK_SCENES,
-        n => n
-            .parse::<usize>()
-            .ok()
-            .filter(|&n| n >= 1)
-            .with_context(|| format!("--scenes {n}: expected a positive number or `all`"))?,
-    };
+    let scenes = parse_scenes(&args.scenes)?;
     let methods = Method::parse_list(&args.methods, args.refine_mesh)?;
     let settings = MeshSetting::parse_choice(&args.mesh)?;
-    let (shard, shards) = match &args.shard {
+    let shard = match &args.shard {
         Some(s) => parse_shard(s)?,
         None => (0, 1),
     };
@@ -170,45 +114,25 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     {
         bail!("--root, --model-dir and --html-dir are for --dataset interhand");
     }
-    let mut config = args.training.read()?;
-    if let Some(n) = args.iterations {
-        config.iterations = n;
-    }
-    config.validate()?;
+    let config = args
+        .training
+        .read()?
+        .with_overrides(args.iterations, None)?;
     let baseline = BaselineConfig {
         iterations: args.baseline_iterations,
         ..BaselineConfig::default()
     };
     let device = args.device.device()?.autodiff();
-    let host = device.clone().inner();
-    let dataset = match args.dataset {
-        Dataset::Synthetic => "synthetic".to_string(),
-        Dataset::Interhand => format!(
-            "interhand {} {}",
-            args.split,
-            args.root
-                .as_ref()
-                .map_or(String::new(), |r| r.display().to_string())
-        ),
+    let source = match args.dataset {
+        Dataset::Synthetic => EvalSource::Synthetic,
+        Dataset::Interhand => EvalSource::InterHand {
+            root: args.root.as_deref(),
+            split: &args.split,
+            model_dir: args.model_dir.as_deref(),
+            html_dir: args.html_dir.as_deref(),
+            all: args.scenes == "all",
+        },
     };
-    let plan = EvalPlan {
-        train: &config,
-        baseline: &baseline,
-        methods: &methods,
-        settings: &settings,
-        scenes,
-        dataset: &dataset,
-    };
-    prepare_folder(&args.out, &plan)?;
-    let lpips = match &args.lpips {
-        Some(p) => Some(
-            LpipsVgg::load(p, &host).with_context(|| format!("LPIPS weights {}", p.display()))?,
-        ),
-        None => LpipsVgg::find(&host).context("LPIPS weights")?,
-    };
-    if lpips.is_none() {
-        eprintln!("no LPIPS weights (see `bitt convert-lpips`): LPIPS is reported as n/a");
-    }
     let run = EvalRun {
         out: &args.out,
         cache: &args.cache,
@@ -216,56 +140,30 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         baseline: &baseline,
         methods: &methods,
         settings: &settings,
-        lpips: lpips.as_ref(),
-        shard: (shard, shards),
+        lpips: None,
+        shard,
     };
-    let mut bar = EvalBar {
-        line: ProgressLine::open_ended(),
-        done: 0,
-        total: 0,
-        label: String::new(),
+    let evaluation = Evaluation {
+        run,
+        scenes,
+        lpips: args.lpips.as_deref(),
+        source,
     };
-    match args.dataset {
-        Dataset::Synthetic => evaluate_synthetic(&run, scenes, &device, &mut bar)?,
-        Dataset::Interhand => {
-            let root = args
-                .root
-                .as_ref()
-                .context("--dataset interhand needs --root (the InterHand2.6M folder)")?;
-            let (hands, prior) = sources(args.model_dir.as_deref(), args.html_dir.as_deref());
-            let data = InterHandScenes {
-                root,
-                split: &args.split,
-                hands,
-                prior,
-                scenes: (args.scenes != "all").then_some(scenes),
-            };
-            evaluate_interhand(&run, &data, &device, &mut bar)?;
-        }
-    }
-    finish(&args.out, started)
-}
-
-/// Merges the scene results in `out` into its tables and says where they are.
-fn finish(out: &Path, started: Instant) -> Result<()> {
-    merge(&[out.to_path_buf()])?;
+    let tables = run_evaluation(&evaluation, &device, &mut EvalBar::default())?;
+    println!("{tables}");
     println!(
         "evaluation done in {:.1} min; results in {}/results.md",
         started.elapsed().as_secs_f64() / 60.0,
-        out.display()
+        args.out.display()
     );
     Ok(())
 }
 
-/// Merges the scene results of `dirs` into the tables of `dirs[0]` and prints them.
-fn merge(dirs: &[PathBuf]) -> Result<()> {
-    println!("{}", bitt::benchmark::merge(dirs)?);
-    Ok(())
-}
-
-/// `bitt eval-merge`.
+/// `bitt eval-merge`: merges the scene results of the folders into the tables of the first
+/// and prints them.
 pub fn merge_cmd(args: &MergeArgs) -> Result<()> {
-    merge(&args.dirs)
+    println!("{}", bitt::benchmark::merge(&args.dirs)?);
+    Ok(())
 }
 
 #[cfg(test)]
@@ -273,6 +171,7 @@ mod tests {
     use super::*;
     use bitt::benchmark::SceneResult;
     use bitt_tests::real_fixture::{scratch, write_mini_interhand};
+    use std::path::Path;
 
     type Cli = crate::test_args::Parsed<EvalArgs>;
 

@@ -63,15 +63,12 @@ pub fn run(args: &ExportArgs) -> Result<()> {
     let hands = args.other_pose.hands(&saved)?;
     export_run(&saved, hands.as_ref(), kind, &args.out)
         .with_context(|| format!("--out {}", args.out.display()))?;
-    let what = match kind {
-        ExportKind::Rigged if hands.is_none() && saved.num_novel_poses() > 0 => format!(
-            "rigged avatar with a clip of {} novel poses",
-            saved.num_novel_poses()
-        ),
-        ExportKind::Rigged => "rigged avatar".to_string(),
-        ExportKind::Static => "posed meshes (glTF, no rig)".to_string(),
-        ExportKind::Obj => "posed meshes (OBJ, MTL and textures)".to_string(),
+    let clip = if hands.is_none() {
+        saved.num_novel_poses()
+    } else {
+        0
     };
+    let what = kind.written(clip);
     println!("wrote {} ({what})", args.out.display());
     Ok(())
 }

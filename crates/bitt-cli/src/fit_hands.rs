@@ -7,14 +7,14 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use bitt::config_files::{refine_config, training_config};
 use bitt::fit::{
-    FitConfig, SyntheticFitSettings, check_fit_out, fit_eval_summary, fit_photo,
+    FitConfig, SyntheticFitSettings, check_fit_out, fit_eval_line, fit_eval_summary, fit_photo,
     fit_synthetic_scenes, write_fit_eval, write_fit_outputs,
 };
 use bitt_nets::Preset;
 
 use crate::args::{HandsArgs, KeypointArgs};
 use crate::device::DeviceName;
-use crate::progress::{FitBar, RefineBar};
+use bitt::progress::{FitBar, RefineBar};
 
 /// Arguments of `bitt fit-hands`.
 #[derive(Debug, clap::Args)]
@@ -88,32 +88,10 @@ fn run_scenes(args: &FitHandsArgs, config: &FitConfig) -> Result<()> {
         default_intrinsics: args.default_intrinsics,
     };
     let results = fit_synthetic_scenes(&args.scene, &settings, config, &device, |dir, r| {
-        let scores = &r.scores;
-        println!(
-            "{}: 2D joints {:.2} px, root-relative 3D {:.1} mm (max {:.1}), min flexion {:.0} deg ({} bent backwards), {:.1} s",
-            dir.display(),
-            scores.joint_2d_px,
-            scores.joint_3d_mm,
-            scores.max_joint_3d_mm,
-            scores.min_flexion_deg,
-            scores.bent_backwards,
-            r.seconds
-        );
+        println!("{}", r.line(dir));
     })?;
     let summary = fit_eval_summary(&results, &settings, config);
-    println!(
-        "mean over {} scenes: 2D joints {:.2} px, root-relative 3D {:.1} mm, {} joints bent backwards, {:.1} s per fit ({} intrinsics)",
-        results.len(),
-        summary["mean_joint_2d_px"].as_f64().unwrap_or(f64::NAN),
-        summary["mean_joint_3d_mm"].as_f64().unwrap_or(f64::NAN),
-        summary["bent_backwards"],
-        summary["mean_seconds"].as_f64().unwrap_or(f64::NAN),
-        if args.default_intrinsics {
-            "default"
-        } else {
-            "true"
-        }
-    );
+    println!("{}", fit_eval_line(results.len(), &summary));
     let path = write_fit_eval(&args.out, &summary)?;
     println!("wrote {}", path.display());
     Ok(())
@@ -138,7 +116,7 @@ pub fn run(args: &FitHandsArgs) -> Result<()> {
         )),
         None => None,
     };
-    let mut refine_bar = RefineBar::new();
+    let mut refine_bar = RefineBar::default();
     let done = fit_photo(
         image,
         &args.keypoint.source(keypoints),
@@ -156,7 +134,7 @@ pub fn run(args: &FitHandsArgs) -> Result<()> {
         }),
         Some(args.cache.as_path()),
         &device,
-        &mut FitBar::new(),
+        &mut FitBar::default(),
     )
     .with_context(|| {
         format!(
@@ -167,27 +145,9 @@ pub fn run(args: &FitHandsArgs) -> Result<()> {
     })?;
     eprintln!();
     write_fit_outputs(&args.out, &done)?;
-    for n in &done.fit.report.notes {
-        println!("note: {n}");
+    for line in done.report_lines(&args.out) {
+        println!("{line}");
     }
-    println!("camera: {}", done.camera_source);
-    for h in &done.fit.report.hands {
-        println!(
-            "{} hand: {} keypoints, residual {:.2} px mean ({:.2} max), wrist at {:.3} m",
-            h.side, h.keypoints, h.mean_residual_px, h.max_residual_px, h.wrist_depth_m
-        );
-    }
-    if let Some(r) = &done.refinement {
-        println!(
-            "mask refinement: silhouette IoU {:.4} -> {:.4}",
-            r.iou_before, r.iou_after
-        );
-    }
-    println!(
-        "fitted in {:.1} s; wrote {out}/hands.json (use it as --annotation), {out}/fit.json and {out}/overlay.png",
-        done.fit.report.seconds,
-        out = args.out.display()
-    );
     Ok(())
 }
 

@@ -4,9 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use bitt::gpu_check::{
-    AdapterKind, CheckDevices, StageReport, StageStatus, plan_training, run_check,
-};
+use bitt::gpu_check::{AdapterKind, CheckDevices, StageReport, plan_training, run_check};
 use bitt_nets::Preset;
 use burn::tensor::Device;
 
@@ -34,18 +32,6 @@ driver's Vulkan ICD (nvidia_icd.json and libGLX_nvidia.so) comes into a containe
 `graphics` driver capability (NVIDIA_DRIVER_CAPABILITIES=all or compute,utility,graphics); a \
 container with `compute,utility` alone has CUDA but no Vulkan adapter. Elsewhere, install a \
 Vulkan driver (Mesa's lavapipe, package mesa-vulkan-drivers, is a CPU one)";
-
-fn progress(r: &StageReport) {
-    match r.status {
-        StageStatus::Ok => eprintln!("gpu-check {}: ok ({:.1} s)", r.name, r.seconds),
-        StageStatus::Failed => eprintln!(
-            "gpu-check {}: FAILED ({:.1} s): {}",
-            r.name,
-            r.seconds,
-            r.error.as_deref().unwrap_or("")
-        ),
-    }
-}
 
 /// `bitt gpu-check`.
 pub fn run(args: &GpuCheckArgs) -> Result<()> {
@@ -87,7 +73,9 @@ pub fn run(args: &GpuCheckArgs) -> Result<()> {
         host_name: "flex".into(),
         adapter,
     };
-    let report = run_check(&devices, &plan, &mut progress);
+    let report = run_check(&devices, &plan, &mut |r: &StageReport| {
+        eprintln!("{}", r.progress_line());
+    });
     let path = args.out.join(REPORT_FILE);
     let text = serde_json::to_string_pretty(&report)?;
     let written =

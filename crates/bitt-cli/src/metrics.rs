@@ -1,15 +1,13 @@
 //! `bitt metrics A.png B.png` (the image metrics of one pair as JSON) and `bitt
 //! convert-lpips` (the `lpips` package's VGG weights to the safetensors file LPIPS reads).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use anyhow::{Context, Result};
-use bitt::BittError;
-use bitt::lpips::{self, LpipsVgg};
-use bitt::lpips_convert::{self, StateDict};
+use anyhow::Result;
+use bitt::lpips;
+use bitt::lpips_convert::{self, torch_state_dict};
 use bitt::metrics::SsimWindow;
-use bitt::pair_metrics::{compare_images, pair_report};
-use bitt_pickle::{ArrayData, Value};
+use bitt::pair_metrics::{compare_images, lpips_weights, no_lpips_note, pair_lpips, pair_report};
 use serde_json::json;
 
 use crate::device::DeviceName;
@@ -89,37 +87,14 @@ pub fn run(args: &MetricsArgs) -> Result<()> {
 fn compute(args: &MetricsArgs, default_weights: Option<PathBuf>) -> Result<serde_json::Value> {
     let window = SsimWindow::from(args.ssim_window);
     let pair = compare_images(&args.a, &args.b, args.mask.as_deref(), window)?;
-    let weights = match &args.lpips {
-        Some(p) => Some(p.clone()),
-        None => default_weights.clone().filter(|p| p.is_file()),
-    };
-    let (lpips_value, lpips_note) = match &weights {
-        None => (
-            None,
-            format!(
-                "LPIPS unavailable: no weights (pass --lpips FILE, set BITT_LPIPS_WEIGHTS, or \
-                 write {} with `bitt convert-lpips`); it is not estimated",
-                default_weights.map_or("~/.cache/bitt/lpips_vgg.safetensors".into(), |p| p
-                    .display()
-                    .to_string())
-            ),
-        ),
-        Some(p) => {
-            let device = args.device.device()?;
-            let net = LpipsVgg::load(p, &device)?;
-            let (a, b) = &pair.lpips_inputs;
-            let d = net
-                .distance(a, b, pair.dims(), &device)
-                .context("computing LPIPS")?;
-            (
-                Some(d),
-                format!(
-                    "LPIPS-VGG v0.1 from {}, inputs mapped from [0, 1] to [-1, 1]",
-                    p.display()
-                ),
-            )
-        }
-    };
+    let (lpips_value, lpips_note) =
+        match lpips_weights(args.lpips.as_deref(), default_weights.as_deref()) {
+            None => (None, no_lpips_note(default_weights.as_deref())),
+            Some(p) => {
+                let (d, note) = pair_lpips(&pair, &p, &args.device.device()?)?;
+                (Some(d), note)
+            }
+        };
     Ok(pair_report(
         &args.a,
         &args.b,
@@ -131,38 +106,13 @@ fn compute(args: &MetricsArgs, default_weights: Option<PathBuf>) -> Result<serde
     ))
 }
 
-/// The float tensors of a torch checkpoint's state dict (values as `f32`).
-fn state_dict(path: &Path) -> Result<StateDict, BittError> {
-    let v = bitt_pickle::load_torch(path).map_err(|e| BittError::Invalid(e.to_string()))?;
-    let Value::Dict(items) = v else {
-        return Err(BittError::corrupt(
-            path,
-            format!(
-                "the checkpoint holds a {}, expected a state dict",
-                v.type_name()
-            ),
-        ));
-    };
-    let mut out = Vec::new();
-    for (k, t) in items {
-        let (Value::Str(name), Value::Array(a)) = (k, t) else {
-            continue;
-        };
-        if matches!(a.data, ArrayData::F32(_) | ArrayData::F64(_)) {
-            let shape = a.shape.clone();
-            out.push((name, shape, a.into_f32()));
-        }
-    }
-    Ok(out)
-}
-
 /// `bitt convert-lpips`.
 pub fn convert(args: &ConvertLpipsArgs) -> Result<()> {
     let done = lpips_convert::convert(
         &args.lin,
         args.vgg.as_deref(),
         args.out.as_deref(),
-        state_dict,
+        torch_state_dict,
         &burn::tensor::Device::flex(),
     )?;
     println!(
@@ -175,6 +125,7 @@ pub fn convert(args: &ConvertLpipsArgs) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::path::Path;
 
     type Cli = crate::test_args::Parsed<MetricsArgs>;
 

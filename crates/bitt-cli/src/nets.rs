@@ -108,15 +108,11 @@ pub fn bench(args: &BenchNetsArgs) -> Result<()> {
         BenchNet::Step => BenchedNet::Step,
     };
     let b = bench_net(net, &config, args.runs, &device)?;
-    let out = serde_json::json!({
-        "net": net.name(),
-        "preset": args.preset,
-        "device": args.device,
-        "conv": format!("{:?}", config.btr.conv),
-        "params": b.params,
-        "input_shape": b.input_shape,
-        "seconds": b.seconds,
-    });
+    let out = b.report(
+        &config,
+        serde_json::json!(args.preset),
+        serde_json::json!(args.device),
+    );
     println!("{out}");
     Ok(())
 }

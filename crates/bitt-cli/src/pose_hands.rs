@@ -2,14 +2,13 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use bitt_mesh::annotation::{
-    InterHandFrame, PosedTwoHands, annotation_image_size, scene_from_interhand_json,
+    InterHandFrame, PosedTwoHands, annotation_image_size, pixel_box_lines,
+    scene_from_interhand_files,
 };
-use bitt_mesh::mano::{load_mano_pkl, save_safetensors};
-use bitt_mesh::{
-    HandPair, Side, TwoHandScene, load_bitt_annotation, load_model_dir, procedural_pair,
-};
+use bitt_mesh::mano::convert_mano_dir;
+use bitt_mesh::{HandPair, TwoHandScene, load_bitt_annotation, load_model_dir, procedural_pair};
 
 /// The hand models of `bitt pose-hands` and `bitt render`: MANO or the procedural hands.
 #[derive(Debug, Clone, clap::Args)]
@@ -114,11 +113,6 @@ fn scene(args: &PoseHandsArgs) -> Result<TwoHandScene> {
             "give --annotation FILE, or all of --interhand-mano, --interhand-cameras, --capture, --frame, --camera-name"
         );
     };
-    let read = |p: &Path| -> Result<serde_json::Value> {
-        let text =
-            std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
-        serde_json::from_str(&text).with_context(|| format!("{} is not valid JSON", p.display()))
-    };
     let Some(size) = args.image_size else {
         bail!(
             "--image-size WxH is required with InterHand2.6M JSON (the full frame's size, e.g. 334x512)"
@@ -129,52 +123,15 @@ fn scene(args: &PoseHandsArgs) -> Result<TwoHandScene> {
         frame_idx: frame.clone(),
         camera: camera.clone(),
     };
-    Ok(scene_from_interhand_json(
-        &read(mano_path)?,
-        &read(cam_path)?,
-        &which,
-        size,
-        mano_path,
-        cam_path,
+    Ok(scene_from_interhand_files(
+        mano_path, cam_path, &which, size,
     )?)
 }
 
 /// Prints each hand's projected bounding box (text or one JSON object).
 pub fn report_boxes(scene: &TwoHandScene, posed: &PosedTwoHands, json: bool) {
-    let mut boxes = serde_json::Map::new();
-    for side in Side::BOTH {
-        let Some(p) = posed.get(side) else {
-            if !json {
-                println!("{side} hand: not annotated");
-            }
-            continue;
-        };
-        match scene.pixel_box(&p.vertices) {
-            Some(b) if json => {
-                boxes.insert(
-                    side.to_string(),
-                    serde_json::json!([b.min.x, b.min.y, b.max.x, b.max.y]),
-                );
-            }
-            Some(b) => println!(
-                "{side} hand: 2D box x {:.1}..{:.1}, y {:.1}..{:.1} ({:.1} x {:.1} px in a {}x{} image)",
-                b.min.x,
-                b.max.x,
-                b.min.y,
-                b.max.y,
-                b.size().x,
-                b.size().y,
-                scene.camera.width,
-                scene.camera.height
-            ),
-            None if json => {
-                boxes.insert(side.to_string(), serde_json::Value::Null);
-            }
-            None => println!("{side} hand: behind the camera"),
-        }
-    }
-    if json {
-        println!("{}", serde_json::Value::Object(boxes));
+    for line in pixel_box_lines(scene, posed, json) {
+        println!("{line}");
     }
 }
 
@@ -196,28 +153,7 @@ pub fn run(args: &PoseHandsArgs) -> Result<()> {
 
 /// `bitt convert-mano`: reads both pickles (checking them fully) and writes safetensors.
 pub fn convert_mano(model_dir: &Path, out: &Path) -> Result<()> {
-    let mut written = Vec::new();
-    let mut pair = Vec::new();
-    for (side, name) in [(Side::Left, "MANO_LEFT"), (Side::Right, "MANO_RIGHT")] {
-        let src = model_dir.join(format!("{name}.pkl"));
-        if !src.is_file() {
-            bail!(
-                "{} not found (expected MANO_LEFT.pkl and MANO_RIGHT.pkl as distributed)",
-                src.display()
-            );
-        }
-        pair.push((load_mano_pkl(&src, side)?, name));
-    }
-    let (right, _) = &pair[1];
-    let right = right.clone();
-    if bitt_mesh::mano::fix_left_shapedirs(&mut pair[0].0, &right) {
-        println!("left shapedirs: applied the well-known x-sign fix");
-    }
-    for (model, name) in &pair {
-        let dst = out.join(format!("{name}.safetensors"));
-        save_safetensors(model, &dst)?;
-        written.push(dst);
-    }
+    let written = convert_mano_dir(model_dir, out, |line| println!("{line}"))?;
     for w in written {
         println!("wrote {}", w.display());
     }

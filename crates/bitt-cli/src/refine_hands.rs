@@ -5,12 +5,12 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use bitt::config_files::refine_config;
-use bitt::refine::{check_refine_out, refine_photo, refine_scene, write_refine_outputs};
+use bitt::refine::{check_refine_out, refine_photo, refine_scene};
 use bitt_synth::SynthScene;
 
 use crate::args::{HandsArgs, TrainingArgs};
 use crate::device::DeviceName;
-use crate::progress::RefineBar;
+use bitt::progress::RefineBar;
 
 /// Arguments of `bitt refine-hands`.
 #[derive(Debug, clap::Args)]
@@ -71,31 +71,16 @@ pub fn run(args: &RefineHandsArgs) -> Result<()> {
     )?;
     let cache = Some(args.cache.as_path());
     check_refine_out(&args.out)?;
-    let mut bar = RefineBar::new();
-    if let Some(dir) = &args.scene {
+    let mut bar = RefineBar::default();
+    let lines = if let Some(dir) = &args.scene {
         if args.hands.model_dir.is_some() || args.mask.is_some() {
             bail!("--scene refines a synthetic scene's procedural hands: drop --model-dir/--mask");
         }
         let scene = SynthScene::read(dir).with_context(|| format!("--scene {}", dir.display()))?;
         let done = refine_scene(&scene, &train, &config, cache, &device, &mut bar)
             .with_context(|| format!("refining --scene {}", dir.display()))?;
-        write_refine_outputs(
-            &args.out,
-            &bitt_mesh::procedural_pair(),
-            &done.refinement.hands,
-            &done.record(),
-            &done.overlay,
-        )?;
-        print_notes(&done.refinement.report.notes);
-        let (b, a) = (done.vertex_error_before, done.vertex_error_after);
-        println!(
-            "projected vertex error: {:.2} px mean ({:.2} max) before, {:.2} px mean ({:.2} max) after",
-            b.0, b.1, a.0, a.1
-        );
-        println!(
-            "silhouette IoU against the true meshes: {:.4} before, {:.4} after; {:.1} s",
-            done.iou_truth_before, done.iou_truth_after, done.refinement.report.seconds
-        );
+        done.write(&args.out)?;
+        done.report_lines()
     } else if let (Some(image), Some(annotation)) = (&args.image, &args.annotation) {
         let (hands, prior) = args.hands.sources();
         let size = args.size.unwrap_or(bitt::real::BITT_CROP_SIZE as usize);
@@ -122,32 +107,19 @@ pub fn run(args: &RefineHandsArgs) -> Result<()> {
                 annotation.display()
             )
         })?;
-        write_refine_outputs(
-            &args.out,
-            &done.models,
-            &done.refinement.hands,
-            &done.record(),
-            &done.overlay,
-        )?;
-        print_notes(&done.refinement.report.notes);
-        println!(
-            "silhouette IoU against the mask ({}): {:.4} before, {:.4} after; {:.1} s at {size}x{size}",
-            done.mask_source, done.iou_before, done.iou_after, done.refinement.report.seconds
-        );
+        done.write(&args.out)?;
+        done.report_lines(size)
     } else {
         bail!("give --scene DIR, or --image IMG --annotation FILE");
+    };
+    for line in lines {
+        println!("{line}");
     }
     println!(
         "wrote {0}/hands.json (use it as --annotation), {0}/refine.json and {0}/overlay.png",
         args.out.display()
     );
     Ok(())
-}
-
-fn print_notes(notes: &[String]) {
-    for n in notes {
-        println!("note: {n}");
-    }
 }
 
 #[cfg(test)]

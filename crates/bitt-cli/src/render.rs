@@ -1,18 +1,17 @@
 //! `bitt render`: render both hands of a scene with a UV texture under a point light, and
 //! optionally unwrap an image onto both hands' texels (the paper's visible texels and masks).
 //!
-//! Every input is read and checked before anything is rendered, and every output is made in
-//! memory before the first file is written (each one atomically), so a bad input leaves no
-//! half-written set of files behind.
+//! Every input is read and checked before anything is rendered (`bitt::figure_inputs`), and
+//! every output is made in memory before the first file is written (`bitt::figure`), so a
+//! bad input leaves no half-written set of files behind.
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, anyhow, bail};
-use bitt::figure::{FigureHand, FigureImage, FigureOptions, default_light, render_figure};
-use bitt::figure_inputs::{hand_uvs, image_tensor, procedural_textures, read_light};
-use bitt_mesh::annotation::annotation_image_size;
-use bitt_mesh::{HandPair, Side, UvLayout};
-use bitt_texture::{ImageDifference, load_image};
+use anyhow::Result;
+use bitt::figure::{
+    FigureOptions, check_figure_options, default_light, render_figure, write_figure,
+};
+use bitt::figure_inputs::{FigureFiles, figure_inputs, read_light};
 
 use crate::device::DeviceName;
 
@@ -75,172 +74,53 @@ pub struct RenderArgs {
     pub device: DeviceName,
 }
 
-/// `<stem><suffix>.png` next to `out` (e.g. `img.png` -> `img.left.png`).
-pub fn sibling(out: &Path, suffix: &str) -> PathBuf {
-    let stem = out
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "render".into());
-    out.with_file_name(format!("{stem}.{suffix}.png"))
-}
-
-fn load_models(args: &RenderArgs) -> Result<(HandPair, [UvLayout; 2])> {
-    let models = args.hands.models()?;
-    let uvs = hand_uvs(&models, args.uvs.as_deref(), args.uvs_left.as_deref())?;
-    Ok((models, uvs))
-}
-
-fn load_scene(args: &RenderArgs, models: &HandPair) -> Result<bitt_mesh::TwoHandScene> {
-    if args.demo {
-        return Ok(bitt::demo::demo_scene(models));
-    }
-    let Some(path) = &args.annotation else {
-        bail!("give --annotation FILE or --demo");
-    };
-    let size = args
-        .image_size
-        .unwrap_or_else(|| annotation_image_size(path));
-    Ok(bitt_mesh::load_bitt_annotation(path, size)?)
-}
-
 /// `bitt render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
-    if !(64..=2048).contains(&args.uv_size) {
-        bail!(
-            "--uv-size must be between 64 and 2048 (got {})",
-            args.uv_size
-        );
-    }
-    if args.views.is_some() && args.unwrap.is_some() {
-        bail!("--views and --unwrap cannot be combined");
-    }
-    if let Some(n) = args.views
-        && !(1..=12).contains(&n)
-    {
-        bail!("--views must be between 1 and 12 (got {n})");
-    }
-    if args.out.extension().and_then(|e| e.to_str()) != Some("png") {
-        bail!("--out {}: must be a .png file", args.out.display());
-    }
-    if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty())
-        && !dir.is_dir()
-    {
-        bail!(
-            "--out {}: folder {} does not exist",
-            args.out.display(),
-            dir.display()
-        );
-    }
+    check_figure_options(args.uv_size, args.views, args.unwrap.is_some(), &args.out)?;
     // Inputs first: light, models, scene, textures, the image to unwrap.
     let light = match &args.light {
         Some(l) => read_light(l)?,
         None => default_light(),
     };
     let device = args.device.device()?;
-    let (models, uvs) = load_models(args)?;
-    let scene = load_scene(args, &models)?;
-    let posed = scene.pose_in_camera(&models)?;
-    let mut hands = Vec::new();
-    for (side, uv) in [Side::Left, Side::Right].into_iter().zip(uvs.clone()) {
-        let vertices = posed
-            .get(side)
-            .with_context(|| {
-                format!(
-                    "{}: the scene has no {side} hand; bitt render needs both",
-                    args.annotation
-                        .as_ref()
-                        .map_or("the demo scene".into(), |p| p.display().to_string())
-                )
-            })?
-            .vertices
-            .clone();
-        hands.push(FigureHand {
-            side,
-            model: models.get(side).clone(),
-            uv,
-            vertices,
-        });
-    }
-    let hands: [FigureHand; 2] = hands
-        .try_into()
-        .map_err(|_| anyhow!("two hands expected"))?;
-    let textures = match &args.texture {
-        Some(path) => {
-            let (t, _) = image_tensor(path, "--texture", &device)?;
-            vec![t.clone(), t]
-        }
-        None => procedural_textures(&models, &uvs, args.skin_seed, args.uv_size, &device)?,
+    let models = args.hands.models()?;
+    let files = FigureFiles {
+        uvs: args.uvs.as_deref(),
+        uvs_left: args.uvs_left.as_deref(),
+        annotation: args.annotation.as_deref().filter(|_| !args.demo),
+        image_size: args.image_size,
+        texture: args.texture.as_deref(),
+        skin_seed: args.skin_seed,
+        uv_size: args.uv_size,
+        unwrap: args.unwrap.as_deref(),
     };
-    let camera = &scene.camera;
-    let unwrap = match &args.unwrap {
-        Some(path) => {
-            let (t, [h, w]) = image_tensor(path, "--unwrap", &device)?;
-            if [h, w] != [camera.height as usize, camera.width as usize] {
-                bail!(
-                    "--unwrap {}: the image is {w}x{h}, but the camera renders {}x{}; \
-                     unwrap an image of the camera's size",
-                    path.display(),
-                    camera.width,
-                    camera.height
-                );
-            }
-            Some(t)
-        }
-        None => None,
-    };
+    let inputs = figure_inputs(&models, &files, &device)?;
     let options = FigureOptions {
         uv_size: args.uv_size,
         views: args.views,
-        unwrap,
+        unwrap: inputs.unwrap,
         antialias: !args.no_antialias,
     };
-    let (images, stats) = render_figure(&hands, &textures, camera, &light, &options)?;
-    write_all(&args.out, &images)?;
+    let (images, stats) = render_figure(
+        &inputs.hands,
+        &inputs.textures,
+        &inputs.camera,
+        &light,
+        &options,
+    )?;
+    write_figure(&args.out, &images, |path, o| {
+        eprintln!("wrote {} ({}x{})", path.display(), o.width, o.height);
+    })?;
     if let Some(stats) = stats {
         println!("{}", serde_json::to_string_pretty(&stats)?);
     }
     Ok(())
 }
 
-/// Writes a figure's images: the main one at `out`, the others next to it ([`sibling`]).
-fn write_all(out: &Path, images: &[FigureImage]) -> Result<()> {
-    for o in images {
-        let path = match &o.suffix {
-            None => out.to_path_buf(),
-            Some(suffix) => sibling(out, suffix),
-        };
-        bitt_texture::save_png8(&path, &o.data, o.width, o.height)
-            .with_context(|| format!("writing {}", path.display()))?;
-        eprintln!("wrote {} ({}x{})", path.display(), o.width, o.height);
-    }
-    Ok(())
-}
-
-/// `bitt image-diff A B`: mean and largest absolute difference of two images of equal size
-/// (values in `[0, 1]`), as JSON; used by `cargo xtask e2e` to compare backends.
+/// `bitt image-diff A B`: mean and largest absolute difference of two images of equal size,
+/// as JSON (`bitt::pair_metrics::image_diff`); used by `cargo xtask e2e` to compare backends.
 pub fn image_diff(a: &Path, b: &Path) -> Result<()> {
-    let ia = load_image(a).with_context(|| format!("cannot load {}", a.display()))?;
-    let ib = load_image(b).with_context(|| format!("cannot load {}", b.display()))?;
-    let Some(d) = ImageDifference::between(&ia, &ib) else {
-        bail!(
-            "{} is {}x{} but {} is {}x{}",
-            a.display(),
-            ia.width,
-            ia.height,
-            b.display(),
-            ib.width,
-            ib.height
-        );
-    };
-    println!(
-        "{}",
-        serde_json::json!({
-            "mean_abs_diff": d.mean_abs_diff,
-            "max_abs_diff": d.max_abs_diff,
-            "mean_a": d.mean_a,
-            "mean_b": d.mean_b,
-        })
-    );
+    println!("{}", bitt::pair_metrics::image_diff(a, b)?);
     Ok(())
 }
 

@@ -16,10 +16,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use bitt::evaluate::move_light;
-use bitt::real::orbit_hands;
-use bitt::saved::SavedRun;
-use bitt_mesh::PinholeCamera;
+use bitt::saved::{AvatarView, SavedRun};
 
 use crate::avatar_pose::OtherPoseArgs;
 use crate::device::DeviceName;
@@ -73,30 +70,6 @@ fn parse_view(s: &str) -> Result<(f64, f64), String> {
     Ok((a, e))
 }
 
-/// `camera` with its intrinsics scaled to a `size x size` image.
-fn resized(camera: &PinholeCamera, size: u32) -> Result<PinholeCamera> {
-    if !(8..=4096).contains(&size) {
-        bail!("--size must be between 8 and 4096 (got {size})");
-    }
-    if camera.width != camera.height {
-        bail!(
-            "--size needs a square camera (got {}x{})",
-            camera.width,
-            camera.height
-        );
-    }
-    let s = f64::from(size) / f64::from(camera.width);
-    let mut k = camera.intrinsics * s;
-    k.z_axis.z = 1.0;
-    Ok(PinholeCamera::new(
-        k,
-        camera.rotation,
-        camera.translation,
-        size,
-        size,
-    )?)
-}
-
 /// `bitt render-avatar`.
 pub fn run(args: &RenderAvatarArgs) -> Result<()> {
     if args.out.extension().and_then(|e| e.to_str()) != Some("png") {
@@ -110,9 +83,8 @@ pub fn run(args: &RenderAvatarArgs) -> Result<()> {
     args.other_pose.check()?;
     let saved = SavedRun::load(&args.run)?;
     let device = args.device.device()?;
-    let models = saved.models();
     // The pose and whether the estimated light stays fixed in the training camera's world.
-    let (base, same_world) = if let Some(k) = args.novel_pose {
+    let (pose, same_world) = if let Some(k) = args.novel_pose {
         let hands = saved.novel_pose(k).with_context(|| {
             format!(
                 "--novel-pose {k}; --pose PKL and --procedural-pose NAME pose the avatar otherwise"
@@ -124,25 +96,15 @@ pub fn run(args: &RenderAvatarArgs) -> Result<()> {
     } else {
         (saved.training(), true)
     };
-    let mut base = base;
-    if let Some(n) = args.size {
-        base.camera = resized(&base.camera, n)?;
-    }
-    let hands = orbit_hands(
-        &base,
-        &models,
-        args.view.0.to_radians(),
-        args.view.1.to_radians(),
-    )?;
-    let light = match user_light {
-        Some(l) => l,
-        None if same_world => move_light(&saved.light(), &saved.camera(), &hands.camera),
-        // The estimated light, placed relative to the base camera as it was relative to the
-        // training camera, then kept in the world while --view orbits.
-        None => move_light(&saved.light(), &base.camera, &hands.camera),
+    let view = AvatarView {
+        pose,
+        same_world,
+        orbit_deg: [args.view.0, args.view.1],
+        size: args.size,
+        light: user_light,
     };
-    let image = saved.render(&hands, &light, &device)?;
-    let (h, w) = (hands.camera.height as usize, hands.camera.width as usize);
+    let (image, camera) = saved.render_view(&view, &device)?;
+    let (h, w) = (camera.height as usize, camera.width as usize);
     bitt::outputs::write_png(&args.out, &image, h, w)?;
     println!("wrote {} ({w}x{h})", args.out.display());
     Ok(())

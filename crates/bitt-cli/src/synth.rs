@@ -58,10 +58,6 @@ fn parse_image_size(s: &str) -> Result<u32, String> {
     }
 }
 
-fn percent(x: f64) -> String {
-    format!("{:6.2}%", 100.0 * x)
-}
-
 /// `bitt synth`.
 pub fn run(args: &SynthArgs) -> Result<()> {
     if !(1..=10_000).contains(&args.scenes) {
@@ -86,60 +82,21 @@ pub fn run(args: &SynthArgs) -> Result<()> {
     let sheet_n = args.sheet_scenes.unwrap_or(12).clamp(1, 24);
     let started = Instant::now();
     let set = write_scene_set(&config, &seeds, &args.out, sheet_n, &device, |w| {
-        let t = w.stats.table3;
-        eprintln!(
-            "scene {:3} seed {:#018x} {:13} left {} right {} sym {} invisible {}  ({:.1} s + write {:.1} s)",
-            w.index,
-            w.seed,
-            format!("{:?}", w.family),
-            percent(t.left_visible),
-            percent(t.right_visible),
-            percent(t.symmetric_usable),
-            percent(t.invisible),
-            w.generate_s,
-            w.write_s,
-        );
+        eprintln!("{}", w.line());
     })?;
     let (sheet, w, h) = &set.sheet;
-    let (mean, stats_path, sheet_path) = (set.mean, &set.stats_path, &set.sheet_path);
     if let Some(extra) = &args.sheet {
         bitt_texture::save_png8(extra, sheet, *w, *h)
             .with_context(|| format!("--sheet {}", extra.display()))?;
     }
-    let t = mean.table3;
-    println!(
-        "Table 3 ({} scenes, training views)      this     paper (InterHand2.6M)",
-        args.scenes
-    );
-    println!(
-        "left-hand visible texture          {}   35.40%",
-        percent(t.left_visible)
-    );
-    println!(
-        "right-hand visible texture         {}   36.44%",
-        percent(t.right_visible)
-    );
-    println!(
-        "usable symmetric (exactly one)     {}   24.29%",
-        percent(t.symmetric_usable)
-    );
-    println!(
-        "invisible (on neither hand)        {}   19.89%",
-        percent(t.invisible)
-    );
-    println!(
-        "symmetry gain per hand             {}",
-        percent(mean.symmetry_gain)
-    );
-    println!(
-        "reachable per hand (own + other)   {}   ~60%",
-        percent(mean.reachable)
-    );
+    for line in set.table3_lines(args.scenes) {
+        println!("{line}");
+    }
     println!(
         "wrote {} scenes, {} and {} in {:.1} s",
         args.scenes,
-        stats_path.display(),
-        sheet_path.display(),
+        set.stats_path.display(),
+        set.sheet_path.display(),
         started.elapsed().as_secs_f64()
     );
     Ok(())

@@ -1,12 +1,13 @@
-//! `bitt texture` and `bitt convert-html`: UV textures from a texture PCA model.
+//! `bitt texture` and `bitt convert-html`: UV textures from a texture PCA model
+//! (`bitt::texture_model`).
 
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
-use anyhow::{Context, Result, bail};
-use bitt_texture::procedural::noise::SplitMix64;
-use bitt_texture::procedural::{ProceduralTextureConfig, procedural_texture_pca};
-use bitt_texture::{TexturePca, convert_html, load_html_model, save_png8, save_png16};
+use anyhow::{Result, bail};
+use bitt::texture_model::{
+    model_file, normal_params, procedural_config, procedural_model, read_params, write_texture,
+};
+use bitt_texture::{TexturePca, convert_html};
 
 use crate::device::DeviceName;
 
@@ -47,59 +48,18 @@ pub struct TextureArgs {
     pub device: DeviceName,
 }
 
-/// Standard normal numbers from a seed (SplitMix64 + Box-Muller), reproducible everywhere.
-fn normal_params(seed: u64, n: usize) -> Vec<f32> {
-    let mut rng = SplitMix64::new(seed);
-    (0..n)
-        .map(|_| {
-            let (u1, u2) = (rng.next_f64().max(1e-300), rng.next_f64());
-            ((-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()) as f32
-        })
-        .collect()
-}
-
-fn read_params(path: &Path) -> Result<Vec<f32>> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let values: Vec<f64> = serde_json::from_str(&text)
-        .with_context(|| format!("{} must hold a JSON array of numbers", path.display()))?;
-    Ok(values.into_iter().map(|v| v as f32).collect())
-}
-
 fn load_model(args: &TextureArgs) -> Result<TexturePca> {
     if args.procedural {
-        if !(128..=1024).contains(&args.resolution) {
-            bail!(
-                "--resolution must be between 128 and 1024 (got {})",
-                args.resolution
-            );
-        }
-        let config = ProceduralTextureConfig {
-            resolution: args.resolution,
-            ..Default::default()
-        };
-        let start = Instant::now();
-        let (pca, fit, eval) = procedural_texture_pca(&config, &args.device.device()?)?;
-        let explained: f32 = fit.explained_variance_ratio.iter().sum();
-        eprintln!(
-            "procedural texture model: {} identities, {} components ({:.1}% of variance), \
-             held-out RMSE {:.4} vs train {:.4}, fitted in {:.1} s",
-            config.identities,
-            pca.num_components,
-            100.0 * explained,
-            eval.held_out_rmse,
-            eval.train_rmse,
-            start.elapsed().as_secs_f64()
-        );
-        return Ok(pca);
+        let config = procedural_config(args.resolution)?;
+        let device = args.device.device()?;
+        return Ok(procedural_model(&config, &device, |line| {
+            eprintln!("{line}")
+        })?);
     }
     let Some(path) = &args.model else {
         bail!("give --model FILE or --procedural")
     };
-    Ok(match path.extension().and_then(|e| e.to_str()) {
-        Some("safetensors") => TexturePca::load_safetensors(path)?,
-        _ => load_html_model(path)?,
-    })
+    Ok(model_file(path)?)
 }
 
 /// `bitt texture`.
@@ -114,25 +74,11 @@ pub fn run(args: &TextureArgs) -> Result<()> {
         (None, Some(seed)) => normal_params(seed, pca.num_components),
         _ => bail!("give exactly one of --params FILE and --random SEED"),
     };
-    if params.len() != pca.num_components {
-        let source = args
-            .params
-            .as_ref()
-            .map_or("--random".into(), |p| p.display().to_string());
-        bail!(
-            "{source}: holds {} parameters, but the model has {} components",
-            params.len(),
-            pca.num_components
-        );
-    }
-    let compact = pca.texture(&params)?;
-    let image = pca.layout.compact_to_image(&compact, [0.0; 3])?;
-    let (w, h) = (pca.layout.width, pca.layout.height);
-    if args.png16 {
-        save_png16(&args.out, &image, w, h)?;
-    } else {
-        save_png8(&args.out, &image, w, h)?;
-    }
+    let source = args
+        .params
+        .as_ref()
+        .map_or("--random".into(), |p| p.display().to_string());
+    let (w, h) = write_texture(&pca, &params, &source, &args.out, args.png16)?;
     println!(
         "wrote {} ({w}x{h}, {} texels used)",
         args.out.display(),

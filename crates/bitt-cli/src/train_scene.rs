@@ -8,18 +8,17 @@ use std::time::Instant;
 
 use anyhow::{Result, bail};
 use bitt::config_files::refine_config;
-use bitt::real::RealScores;
+use bitt::progress::{SetupLines, TrainBar};
 use bitt::run::files;
-use bitt::run_folder::{fresh_out, write_fresh_run};
+use bitt::run_folder::{check_utf8_paths, fresh_out};
 use bitt::train_scene::{
-    FreshRequest, FreshRun, KeypointInput, SceneInput, finish_run, fresh_run, resumed_run,
+    FreshRequest, KeypointInput, SceneInput, finish_run, resumed_run, start_fresh, summary_lines,
+    training_line, unfinished_error,
 };
-use bitt::{Observer, Progress, TrainConfig};
 use bitt_mesh::interhand::{InterHandSelection, PAPER_NOVEL_POSES, PAPER_NOVEL_VIEWS};
 
 use crate::args::{HandsArgs, KeypointArgs, TrainingArgs};
 use crate::device::DeviceName;
-use crate::progress::{ProgressLine, SetupLines};
 
 /// Where a run goes without `--out`.
 const DEFAULT_OUT: &str = "runs/train-scene";
@@ -118,37 +117,6 @@ pub struct TrainSceneArgs {
     pub refine_config: Option<PathBuf>,
 }
 
-/// The training progress line (`crate::progress`); Ctrl-C sets `stop`.
-struct Bar {
-    line: ProgressLine,
-    done_before: usize,
-    stop: Arc<AtomicBool>,
-}
-
-impl Observer for Bar {
-    fn iteration(&mut self, p: &Progress) {
-        let per = self.line.elapsed() / p.iteration.saturating_sub(self.done_before).max(1) as f64;
-        let eta = per * (p.iterations - p.iteration) as f64;
-        self.line.show(
-            "",
-            p.iteration,
-            p.iterations,
-            &format!(
-                "loss {:.4} PSNR {:.2} dB lr {:.1e} {:.2} s/it ETA {:.0} s",
-                p.terms.total, p.psnr, p.learning_rate, per, eta
-            ),
-        );
-    }
-
-    fn recovered(&mut self, iteration: usize, message: &str) {
-        eprintln!("\nwarning: at iteration {iteration}: {message}");
-    }
-
-    fn should_stop(&self) -> bool {
-        self.stop.load(Ordering::SeqCst)
-    }
-}
-
 /// The Ctrl-C flag, its handler installed once per process (tests run several trainings).
 fn stop_flag() -> Result<Arc<AtomicBool>> {
     static FLAG: OnceLock<Result<Arc<AtomicBool>, String>> = OnceLock::new();
@@ -169,24 +137,13 @@ fn stop_flag() -> Result<Arc<AtomicBool>> {
     }
 }
 
-/// A fresh run's inputs read and checked, and its trainer built (`bitt::train_scene`).
-fn fresh(
-    args: &TrainSceneArgs,
-    config: TrainConfig,
-    device: &burn::tensor::Device,
-) -> Result<FreshRun> {
+/// What a fresh run trains on, as the options name it (`bitt::train_scene`).
+fn request(args: &TrainSceneArgs) -> Result<FreshRequest<'_>> {
     let refine = if args.refine_mesh {
         Some(refine_config(args.refine_config.as_deref(), None, None)?)
     } else {
         None
     };
-    let real = args.image.is_some() || args.interhand.is_some();
-    if !real && (args.hands.model_dir.is_some() || args.hands.html_dir.is_some()) {
-        bail!(
-            "--model-dir and --html-dir apply to real data: give --image IMG --annotation PKL \
-             or --interhand ROOT"
-        );
-    }
     let keypoints = |path: &Path| KeypointInput {
         source: args.keypoint.source(path),
         intrinsics: args.keypoint.intrinsics.clone(),
@@ -221,53 +178,33 @@ fn fresh(
         },
     };
     let (hands, prior) = args.hands.sources();
-    let request = FreshRequest {
+    Ok(FreshRequest {
         input,
         hands,
         prior,
         refine,
         cache: &args.cache,
-    };
-    Ok(fresh_run(&request, config, device, &mut SetupLines)?)
-}
-
-/// Refuses path arguments that are not valid UTF-8 before anything is read or written: a
-/// run records its inputs' paths in `input.json` and `config.json` (JSON text).
-fn check_utf8_paths(args: &TrainSceneArgs) -> Result<()> {
-    let paths = [
-        ("--scene", &args.scene),
-        ("--image", &args.image),
-        ("--annotation", &args.annotation),
-        ("--keypoints", &args.keypoints),
-        ("--mask", &args.mask),
-        ("--interhand", &args.interhand),
-        ("--config", &args.training.config),
-        ("--resume", &args.resume),
-        ("--refine-config", &args.refine_config),
-        ("--model-dir", &args.hands.model_dir),
-        ("--html-dir", &args.hands.html_dir),
-    ];
-    let fixed = [("--out", &args.out), ("--cache", &args.cache)];
-    let all = paths
-        .iter()
-        .filter_map(|(flag, p)| p.as_ref().map(|p| (*flag, p)))
-        .chain(fixed.iter().map(|(flag, p)| (*flag, *p)));
-    for (flag, path) in all {
-        if path.to_str().is_none() {
-            bail!(
-                "{flag} {}: the path is not valid UTF-8; a run records its input paths as JSON \
-                 text. Rename it, or link it under a UTF-8 name",
-                path.display()
-            );
-        }
-    }
-    Ok(())
+    })
 }
 
 /// `bitt train-scene`.
 pub fn run(args: &TrainSceneArgs) -> Result<()> {
     let started = Instant::now();
-    check_utf8_paths(args)?;
+    check_utf8_paths(&[
+        ("--scene", args.scene.as_deref()),
+        ("--image", args.image.as_deref()),
+        ("--annotation", args.annotation.as_deref()),
+        ("--keypoints", args.keypoints.as_deref()),
+        ("--mask", args.mask.as_deref()),
+        ("--interhand", args.interhand.as_deref()),
+        ("--config", args.training.config.as_deref()),
+        ("--resume", args.resume.as_deref()),
+        ("--refine-config", args.refine_config.as_deref()),
+        ("--model-dir", args.hands.model_dir.as_deref()),
+        ("--html-dir", args.hands.html_dir.as_deref()),
+        ("--out", Some(&args.out)),
+        ("--cache", Some(&args.cache)),
+    ])?;
     let device = args.device.device()?.autodiff();
     let (out, mut trainer, input) = match &args.resume {
         Some(dir) => {
@@ -280,52 +217,17 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
             if let Some(note) = note {
                 println!("{note}");
             }
-            let mut config = args.training.read()?;
-            if let Some(n) = args.iterations {
-                config.iterations = n;
-            }
-            if let Some(s) = args.seed {
-                config.seed = s;
-            }
-            config.validate()?;
-            // Every input is read and checked (and the trainer built) before the run folder
-            // is created, so a bad input leaves nothing behind.
-            let FreshRun {
-                trainer,
-                input,
-                refinement,
-                fit,
-            } = fresh(args, config, &device)?;
-            write_fresh_run(&out, &trainer, &input, fit.as_ref(), refinement.as_ref())?;
-            if let Some(r) = &refinement {
-                for n in &r.report.notes {
-                    eprintln!("note: {n}");
-                }
-                eprintln!(
-                    "refined the meshes in {:.1} s: silhouette IoU against the hand mask {:.4} -> {:.4}",
-                    r.report.seconds, r.report.iou_before, r.report.iou_after
-                );
-            }
+            let config = args
+                .training
+                .read()?
+                .with_overrides(args.iterations, args.seed)?;
+            let (trainer, input) =
+                start_fresh(&out, &request(args)?, config, &device, &mut SetupLines)?;
             (out, trainer, input)
         }
     };
-    let config = trainer.config.clone();
-    let [lv, rv] = trainer.view.visible_fraction();
-    eprintln!(
-        "training {} iterations ({} preset, {} texels per hand, {} texture components, visible {:.0}% / {:.0}%)",
-        config.iterations,
-        config.preset,
-        trainer.assets.num_texels(),
-        config.nets.html.coefficients_per_hand,
-        100.0 * lv,
-        100.0 * rv
-    );
-    let stop = stop_flag()?;
-    let mut bar = Bar {
-        line: ProgressLine::new(),
-        done_before: trainer.iteration,
-        stop,
-    };
+    eprintln!("{}", training_line(&trainer));
+    let mut bar = TrainBar::new(trainer.iteration, stop_flag()?);
     let mut gave_up = None;
     match trainer.train(Some(&out.join(files::CHECKPOINT)), &mut bar) {
         Err(bitt::BittError::Interrupted(i)) => {
@@ -347,72 +249,20 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
     }
     eprintln!("writing results");
     let (summary, real_scores) = finish_run(&out, &trainer, &input, args.turntable)?;
-    print_summary(
-        &out,
-        &summary,
-        real_scores.as_ref(),
-        started.elapsed().as_secs_f64(),
-    );
-    if let Some(e) = gave_up {
-        bail!(
-            "training did not finish: {e}. The results in {} are those of iteration {}; \
-             `--resume {}` continues from there at the lowered learning rate",
-            out.display(),
-            trainer.iteration,
-            out.display()
-        );
+    let wall = started.elapsed().as_secs_f64();
+    for line in summary_lines(&out, &summary, real_scores.as_ref(), wall) {
+        println!("{line}");
     }
-    Ok(())
-}
-
-fn print_summary(out: &Path, s: &bitt::run::RunSummary, real: Option<&RealScores>, wall: f64) {
-    println!(
-        "results in {}/ (open {}/report.html)",
-        out.display(),
-        out.display()
-    );
-    println!(
-        "{} iterations, {:.1} s training, {:.1} s wall clock; input-view PSNR {:.2} dB",
-        s.iterations, s.seconds, wall, s.input_psnr
-    );
-    let means = match (&s.synthetic, real) {
-        (Some(g), _) => Some((&g.novel_views, &g.novel_poses)),
-        (None, Some(r)) => Some((&r.novel_views, &r.novel_poses)),
-        _ => None,
-    };
-    if let Some((views, poses)) = means {
-        let against = if real.is_some() { " (photographs)" } else { "" };
-        for (name, m) in [("novel views", views), ("novel poses", poses)] {
-            if let Some(m) = m {
-                println!(
-                    "{name} ({}){against}: PSNR fine {:.2} dB vs coarse {:.2} dB; SSIM fine {:.4} vs coarse {:.4}",
-                    m.count, m.fine.psnr, m.coarse.psnr, m.fine.ssim, m.coarse.ssim
-                );
-            }
-        }
-    }
-    if let Some(t) = s.synthetic.as_ref().and_then(|g| g.texture.as_ref()) {
-        let f = |v: Option<f64>| v.map_or("n/a".to_string(), |v| format!("{v:.4}"));
-        let (fine, coarse) = (&t.fine.gain_fitted, &t.coarse.gain_fitted);
-        println!(
-            "texture L1 after a gain per channel, texels invisible in the input: fine {} vs coarse {} \
-             (visible on the other hand: fine {} vs coarse {}; invisible on both: fine {} vs coarse {}); \
-             raw: fine {} vs coarse {}",
-            f(fine.not_visible),
-            f(coarse.not_visible),
-            f(fine.symmetric),
-            f(coarse.symmetric),
-            f(fine.invisible),
-            f(coarse.invisible),
-            f(t.fine.raw.not_visible),
-            f(t.coarse.raw.not_visible),
-        );
+    match gave_up {
+        Some(e) => Err(unfinished_error(&e, &out, trainer.iteration).into()),
+        None => Ok(()),
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use bitt::TrainConfig;
     use bitt::real::RealInput;
     use bitt::run_folder::load_checkpoints;
     use bitt_nets::Preset;

@@ -598,6 +598,80 @@ fn json_at<'a>(
     Ok(cur)
 }
 
+/// Reads one frame of InterHand2.6M from its files: `mano_path` the
+/// `*_MANO_NeuralAnnot.json`, `camera_path` the `*_camera.json` ([`scene_from_interhand_json`]).
+///
+/// # Errors
+/// A file that cannot be read or is not JSON, or that does not hold the frame.
+pub fn scene_from_interhand_files(
+    mano_path: &Path,
+    camera_path: &Path,
+    frame: &InterHandFrame,
+    image_size: (u32, u32),
+) -> Result<TwoHandScene, MeshError> {
+    let read = |p: &Path| -> Result<serde_json::Value, MeshError> {
+        let text = std::fs::read_to_string(p).map_err(|e| MeshError::Context {
+            context: format!("reading {}", p.display()),
+            source: Box::new(e),
+        })?;
+        serde_json::from_str(&text).map_err(|e| MeshError::Context {
+            context: format!("{} is not valid JSON", p.display()),
+            source: Box::new(e),
+        })
+    };
+    scene_from_interhand_json(
+        &read(mano_path)?,
+        &read(camera_path)?,
+        frame,
+        image_size,
+        mano_path,
+        camera_path,
+    )
+}
+
+/// Each hand's projected 2D bounding box, as the lines to print: one line per hand in text,
+/// or one JSON object (`{"left": [x0, y0, x1, y1] | null, ...}`, hands that are not
+/// annotated left out).
+pub fn pixel_box_lines(scene: &TwoHandScene, posed: &PosedTwoHands, json: bool) -> Vec<String> {
+    let mut lines = Vec::new();
+    let mut boxes = serde_json::Map::new();
+    for side in Side::BOTH {
+        let Some(p) = posed.get(side) else {
+            if !json {
+                lines.push(format!("{side} hand: not annotated"));
+            }
+            continue;
+        };
+        match scene.pixel_box(&p.vertices) {
+            Some(b) if json => {
+                boxes.insert(
+                    side.to_string(),
+                    serde_json::json!([b.min.x, b.min.y, b.max.x, b.max.y]),
+                );
+            }
+            Some(b) => lines.push(format!(
+                "{side} hand: 2D box x {:.1}..{:.1}, y {:.1}..{:.1} ({:.1} x {:.1} px in a {}x{} image)",
+                b.min.x,
+                b.max.x,
+                b.min.y,
+                b.max.y,
+                b.size().x,
+                b.size().y,
+                scene.camera.width,
+                scene.camera.height
+            )),
+            None if json => {
+                boxes.insert(side.to_string(), serde_json::Value::Null);
+            }
+            None => lines.push(format!("{side} hand: behind the camera")),
+        }
+    }
+    if json {
+        lines.push(serde_json::Value::Object(boxes).to_string());
+    }
+    lines
+}
+
 /// Reads one frame of InterHand2.6M: `mano` is the parsed `*_MANO_NeuralAnnot.json`
 /// (`{capture: {frame: {"left"|"right": {pose[48], shape[10], trans[3]} | null}}}`), `cameras`
 /// the parsed `*_camera.json` (`{capture: {campos, camrot, focal, princpt: {camera: ...}}}`).

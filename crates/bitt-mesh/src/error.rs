@@ -88,4 +88,16 @@ pub enum MeshError {
     /// Parameters that cannot be posed (NaN, wrong length...).
     #[error("invalid hand parameters: {0}")]
     InvalidParams(String),
+    /// A request that cannot be met (a file missing from a folder...), said in full.
+    #[error("{0}")]
+    Invalid(String),
+    /// What was being done (reading a file, parsing it) when `source` went wrong.
+    #[error("{context}")]
+    Context {
+        /// What was being done.
+        context: String,
+        /// What went wrong.
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync + 'static>,
+    },
 }

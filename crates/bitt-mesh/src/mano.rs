@@ -257,6 +257,41 @@ fn candidates(dir: &Path, side: Side) -> [PathBuf; 2] {
     ]
 }
 
+/// `bitt convert-mano`: reads `MANO_LEFT.pkl` and `MANO_RIGHT.pkl` in `model_dir` (checking
+/// them fully), fixes the left shapedirs' x-sign when needed, and writes both as
+/// safetensors into `out`; `say` is told of the fix. Returns the files written.
+///
+/// # Errors
+/// A pickle missing or not a MANO model, or a file that cannot be written.
+pub fn convert_mano_dir(
+    model_dir: &Path,
+    out: &Path,
+    mut say: impl FnMut(&str),
+) -> Result<Vec<PathBuf>, MeshError> {
+    let mut written = Vec::new();
+    let mut pair = Vec::new();
+    for (side, name) in [(Side::Left, "MANO_LEFT"), (Side::Right, "MANO_RIGHT")] {
+        let src = model_dir.join(format!("{name}.pkl"));
+        if !src.is_file() {
+            return Err(MeshError::Invalid(format!(
+                "{} not found (expected MANO_LEFT.pkl and MANO_RIGHT.pkl as distributed)",
+                src.display()
+            )));
+        }
+        pair.push((load_mano_pkl(&src, side)?, name));
+    }
+    let right = pair[1].0.clone();
+    if fix_left_shapedirs(&mut pair[0].0, &right) {
+        say("left shapedirs: applied the well-known x-sign fix");
+    }
+    for (model, name) in &pair {
+        let dst = out.join(format!("{name}.safetensors"));
+        save_safetensors(model, &dst)?;
+        written.push(dst);
+    }
+    Ok(written)
+}
+
 /// Loads a hand model from a `.pkl` (MANO as distributed) or `.safetensors` (converted) file.
 pub fn load_hand_model(path: &Path, side: Side) -> Result<HandModel, MeshError> {
     match path.extension().and_then(|e| e.to_str()) {

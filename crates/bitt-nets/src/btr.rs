@@ -279,9 +279,14 @@ fn upsample2(x: Tensor<3>) -> Tensor<3> {
         .reshape([n, c, 2 * l])
 }
 
-/// The other hand's features: the two halves of the batch swapped.
+/// The other hand's features: the two halves of the batch swapped. With one sample per
+/// hand (training) that is a flip of the batch axis, whose gradient is a flip too; the two
+/// slices of the general case each have a zero-padded copy of the whole batch as gradient.
 fn swap_hands(x: Tensor<3>) -> Tensor<3> {
     let b = x.dims()[0] / 2;
+    if b == 1 {
+        return x.flip([0]);
+    }
     Tensor::cat(vec![x.clone().narrow(0, b, b), x.narrow(0, 0, b)], 0)
 }
 
@@ -376,6 +381,33 @@ mod tests {
         BtrConfig::new()
             .with_channels(vec![8, 16, 16, 24])
             .with_bidirectional(bidirectional)
+    }
+
+    /// The flip taken with one sample per hand swaps the hands as the general slices do,
+    /// values and gradients.
+    #[test]
+    fn swapping_hands_by_flip_matches_the_slices() {
+        for (name, device) in devices() {
+            let ad = device.autodiff();
+            for b in [1, 2] {
+                let x = random([2 * b, 3, 5], 7, &ad).require_grad();
+                let w = random([2 * b, 3, 5], 8, &ad);
+                let sliced = Tensor::cat(
+                    vec![x.clone().narrow(0, b, b), x.clone().narrow(0, 0, b)],
+                    0,
+                );
+                assert_eq!(
+                    to_vec(swap_hands(x.clone())),
+                    to_vec(sliced.clone()),
+                    "{name} b={b}"
+                );
+                let grad = |y: Tensor<3>| {
+                    let g = (y * w.clone()).sum().backward();
+                    to_vec(x.grad(&g).expect("gradient"))
+                };
+                assert_close(&grad(swap_hands(x.clone())), &grad(sliced), 0.0, name);
+            }
+        }
     }
 
     #[test]

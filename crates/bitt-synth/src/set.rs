@@ -24,6 +24,66 @@ pub struct WrittenScene {
     pub write_s: f64,
 }
 
+fn percent(x: f64) -> String {
+    format!("{:6.2}%", 100.0 * x)
+}
+
+impl WrittenScene {
+    /// The scene's progress line: index, seed, pose family, Table-3 fractions, timings.
+    pub fn line(&self) -> String {
+        let t = self.stats.table3;
+        format!(
+            "scene {:3} seed {:#018x} {:13} left {} right {} sym {} invisible {}  ({:.1} s + write {:.1} s)",
+            self.index,
+            self.seed,
+            format!("{:?}", self.family),
+            percent(t.left_visible),
+            percent(t.right_visible),
+            percent(t.symmetric_usable),
+            percent(t.invisible),
+            self.generate_s,
+            self.write_s,
+        )
+    }
+}
+
+impl SceneSet {
+    /// The set's Table 3 of `scenes` scenes (training views) beside the paper's numbers
+    /// (InterHand2.6M), with the symmetry gain and the reachable texels per hand.
+    pub fn table3_lines(&self, scenes: usize) -> Vec<String> {
+        let (t, mean) = (self.mean.table3, &self.mean);
+        vec![
+            format!(
+                "Table 3 ({scenes} scenes, training views)      this     paper (InterHand2.6M)"
+            ),
+            format!(
+                "left-hand visible texture          {}   35.40%",
+                percent(t.left_visible)
+            ),
+            format!(
+                "right-hand visible texture         {}   36.44%",
+                percent(t.right_visible)
+            ),
+            format!(
+                "usable symmetric (exactly one)     {}   24.29%",
+                percent(t.symmetric_usable)
+            ),
+            format!(
+                "invisible (on neither hand)        {}   19.89%",
+                percent(t.invisible)
+            ),
+            format!(
+                "symmetry gain per hand             {}",
+                percent(mean.symmetry_gain)
+            ),
+            format!(
+                "reachable per hand (own + other)   {}   ~60%",
+                percent(mean.reachable)
+            ),
+        ]
+    }
+}
+
 /// What [`write_scene_set`] wrote.
 #[derive(Debug, Clone)]
 pub struct SceneSet {

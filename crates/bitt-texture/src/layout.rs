@@ -19,7 +19,7 @@
 
 use bitt_mesh::UvLayout;
 use bitt_mesh::glam::{DVec2, DVec3};
-use burn::tensor::{Device, Int, Tensor, TensorData};
+use burn::tensor::{Device, IndexingUpdateOp, Int, Tensor, TensorData};
 
 use crate::TextureError;
 
@@ -415,22 +415,22 @@ impl TextureLayout {
     /// textures live on, the autodiff one when gradients are needed).
     pub fn gather(&self, device: &Device) -> LayoutGather {
         let t = self.num_texels();
-        let image_index: Vec<i64> = self
+        let unused: Vec<f32> = self
             .index_of
             .iter()
-            .map(|&i| if i == UNUSED { t as i64 } else { i64::from(i) })
+            .map(|&i| if i == UNUSED { 1.0 } else { 0.0 })
             .collect();
         let compact_index: Vec<i64> = self
             .texels
             .iter()
             .map(|&(r, c)| (r as usize * self.width + c as usize) as i64)
             .collect();
-        let hw = image_index.len();
+        let hw = unused.len();
         LayoutGather {
             width: self.width,
             height: self.height,
             num_texels: t,
-            image_index: Tensor::from_data(TensorData::new(image_index, [hw]), device),
+            unused: Tensor::from_data(TensorData::new(unused, [1, hw]), device),
             compact_index: Tensor::from_data(TensorData::new(compact_index, [t]), device),
         }
     }
@@ -465,14 +465,19 @@ pub struct LayoutGather {
     width: usize,
     height: usize,
     num_texels: usize,
-    /// `[H * W]`: compact index of each image texel, `T` (the background column) if unused.
-    image_index: Tensor<1, Int>,
+    /// `[1, H * W]`: 1 at the unused image texels, 0 at the used ones.
+    unused: Tensor<2>,
     /// `[T]`: flat image index `row * W + col` of each compact texel.
     compact_index: Tensor<1, Int>,
 }
 
 impl LayoutGather {
     /// Scatters a compact texture into an image; unused texels get `background`.
+    ///
+    /// Written as "the background at the unused texels, zeros elsewhere, plus each compact
+    /// texel added at its one image position" (`select_assign`), so that the gradient is a
+    /// gather of the image gradient at the used texels rather than a scatter over the whole
+    /// image (as the gradient of a `select` over the image would be). The values are the same.
     ///
     /// # Shapes
     /// compact `[3, T]` -> image `[3, H, W]`
@@ -488,10 +493,24 @@ impl LayoutGather {
             self.num_texels
         );
         let device = compact.device();
-        let bg = Tensor::<2>::from_data(TensorData::new(background.to_vec(), [3, 1]), &device);
-        Tensor::cat(vec![compact, bg], 1)
-            .select(1, self.image_index.clone())
-            .reshape([3, self.height, self.width])
+        let base = if background == [0.0; 3] {
+            Tensor::<2>::zeros([3, self.height * self.width], &device)
+        } else {
+            Tensor::cat(
+                background
+                    .iter()
+                    .map(|&b| self.unused.clone().mul_scalar(b))
+                    .collect(),
+                0,
+            )
+        };
+        base.select_assign(
+            1,
+            self.compact_index.clone(),
+            compact,
+            IndexingUpdateOp::Add,
+        )
+        .reshape([3, self.height, self.width])
     }
 
     /// Gathers the used texels of an image.

@@ -200,6 +200,21 @@ pub enum ExportKind {
     Obj,
 }
 
+impl ExportKind {
+    /// What [`export_run`] wrote, for the user: `clip_poses` novel poses in the rigged clip
+    /// (0 for another pose, which has no clip).
+    pub fn written(self, clip_poses: usize) -> String {
+        match self {
+            ExportKind::Rigged if clip_poses > 0 => {
+                format!("rigged avatar with a clip of {clip_poses} novel poses")
+            }
+            ExportKind::Rigged => "rigged avatar".to_string(),
+            ExportKind::Static => "posed meshes (glTF, no rig)".to_string(),
+            ExportKind::Obj => "posed meshes (OBJ, MTL and textures)".to_string(),
+        }
+    }
+}
+
 /// Writes the avatar of a trained run to `out` again, without retraining: standing in the
 /// training pose with the clip of the scene's novel poses (`hands` `None`), or in `hands`
 /// (another annotation's or a generated pose; no clip, since its world is another one).

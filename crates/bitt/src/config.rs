@@ -239,6 +239,22 @@ impl TrainConfig {
         }
     }
 
+    /// This configuration with `iterations` and `seed` replaced where given (`--iterations`,
+    /// `--seed`), checked ([`TrainConfig::validate`]).
+    ///
+    /// # Errors
+    /// As [`TrainConfig::validate`].
+    pub fn with_overrides(
+        mut self,
+        iterations: Option<usize>,
+        seed: Option<u64>,
+    ) -> Result<Self, BittError> {
+        self.iterations = iterations.unwrap_or(self.iterations);
+        self.seed = seed.unwrap_or(self.seed);
+        self.validate()?;
+        Ok(self)
+    }
+
     /// Checks ranges and that the parts fit together.
     pub fn validate(&self) -> Result<(), BittError> {
         let bad = |m: String| Err(BittError::Invalid(m));

@@ -1,10 +1,14 @@
 //! The built-in two-hand demo scene on any hand model (`bitt demo`, `bitt render`'s default).
 
-use bitt_mesh::annotation::FrameInfo;
+use std::path::Path;
+
+use bitt_mesh::annotation::{FrameInfo, PosedTwoHands};
 use bitt_mesh::lbs::{HandParams, HandPose};
 use bitt_mesh::model::{NUM_BETAS, NUM_POSE};
 use bitt_mesh::{HandPair, PinholeCamera, Side, TwoHandScene};
 use glam::{DMat3, DVec3};
+
+use crate::BittError;
 
 /// Two hands facing each other, palms in, fingers up, a few centimetres apart, 0.5 m in
 /// front of a 256x256 camera: the built-in two-hand scene.
@@ -50,6 +54,27 @@ pub fn demo_scene(models: &HandPair) -> TwoHandScene {
         camera: PinholeCamera::looking_down_z(560.0, 256, 256),
         frame: FrameInfo::default(),
     }
+}
+
+/// `bitt demo`: the demo scene on the procedural hands, posed and written into the existing
+/// folder `out` as `hands.obj`, `hands.glb` and `scene.json`. Returns the scene and its posed
+/// hands.
+///
+/// # Errors
+/// A file that cannot be written.
+pub fn write_demo(out: &Path) -> Result<(TwoHandScene, PosedTwoHands), BittError> {
+    let models = bitt_mesh::procedural_pair();
+    let scene = demo_scene(&models);
+    let posed = scene.pose_in_camera(&models)?;
+    posed.write(
+        &models,
+        &out.join("hands.obj"),
+        Some(&out.join("hands.glb")),
+    )?;
+    let json = serde_json::to_string_pretty(&scene)
+        .map_err(|e| BittError::Invalid(format!("encoding the demo scene: {e}")))?;
+    bitt_mesh::export::write_atomically(&out.join("scene.json"), json.as_bytes())?;
+    Ok((scene, posed))
 }
 
 #[cfg(test)]

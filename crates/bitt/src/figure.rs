@@ -1,8 +1,10 @@
 //! The figures of `bitt render`: both hands of a scene rendered with UV textures under a
 //! point light, each hand alone, their masks after the shared depth test, an image unwrapped
 //! onto both hands' texels (the paper's visible texels, Table 3), and a grid of orthographic
-//! views around the hands with an unwrap row. Everything is made in memory; the caller
-//! writes the images.
+//! views around the hands with an unwrap row. Everything is made in memory before the first
+//! file is written ([`write_figure`]: each one atomically, next to the main one).
+
+use std::path::{Path, PathBuf};
 
 use bitt_mesh::glam::{DMat3, DVec3};
 use bitt_mesh::{HandModel, OrthographicCamera, PinholeCamera, Side, UvLayout};
@@ -14,6 +16,7 @@ use bitt_texture::TextureLayout;
 use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::BittError;
+use crate::error::WithContext;
 use crate::outputs::{contact_sheet_on, fill_hidden_texels};
 use crate::trainer::read;
 
@@ -71,6 +74,77 @@ pub struct FigureOptions {
     pub unwrap: Option<Tensor<3>>,
     /// Silhouette antialiasing.
     pub antialias: bool,
+}
+
+/// Checks `bitt render`'s options before anything is read: the UV size, the views grid (not
+/// with an image to unwrap) and the output PNG, whose folder must exist.
+///
+/// # Errors
+/// The first option out of range, naming it.
+pub fn check_figure_options(
+    uv_size: usize,
+    views: Option<usize>,
+    unwrap: bool,
+    out: &Path,
+) -> Result<(), BittError> {
+    let invalid = |m: String| Err(BittError::Invalid(m));
+    if !(64..=2048).contains(&uv_size) {
+        return invalid(format!(
+            "--uv-size must be between 64 and 2048 (got {uv_size})"
+        ));
+    }
+    if views.is_some() && unwrap {
+        return invalid("--views and --unwrap cannot be combined".into());
+    }
+    if let Some(n) = views
+        && !(1..=12).contains(&n)
+    {
+        return invalid(format!("--views must be between 1 and 12 (got {n})"));
+    }
+    if out.extension().and_then(|e| e.to_str()) != Some("png") {
+        return invalid(format!("--out {}: must be a .png file", out.display()));
+    }
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty())
+        && !dir.is_dir()
+    {
+        return invalid(format!(
+            "--out {}: folder {} does not exist",
+            out.display(),
+            dir.display()
+        ));
+    }
+    Ok(())
+}
+
+/// `<stem>.<suffix>.png` next to `out` (e.g. `img.png` -> `img.left.png`).
+pub fn sibling(out: &Path, suffix: &str) -> PathBuf {
+    let stem = out
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "render".into());
+    out.with_file_name(format!("{stem}.{suffix}.png"))
+}
+
+/// Writes a figure's images: the main one at `out`, the others next to it ([`sibling`]);
+/// `written` is told each file after it is written.
+///
+/// # Errors
+/// An image that cannot be written (the images before it are written).
+pub fn write_figure(
+    out: &Path,
+    images: &[FigureImage],
+    mut written: impl FnMut(&Path, &FigureImage),
+) -> Result<(), BittError> {
+    for o in images {
+        let path = match &o.suffix {
+            None => out.to_path_buf(),
+            Some(suffix) => sibling(out, suffix),
+        };
+        bitt_texture::save_png8(&path, &o.data, o.width, o.height)
+            .context_with(|| format!("writing {}", path.display()))?;
+        written(&path, o);
+    }
+    Ok(())
 }
 
 /// The render mesh of a figure hand (its own UV layout, which may be HTML's).

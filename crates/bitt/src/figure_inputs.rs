@@ -1,16 +1,124 @@
 //! What `bitt render`'s figures are made of, read and checked: the light (inline JSON or a
-//! file), the hands' UV layouts, texture and photo images as tensors, and the default
-//! procedural skin textures.
+//! file), the hands' UV layouts, the scene and its posed hands, texture and photo images as
+//! tensors, and the default procedural skin textures.
 
 use std::path::Path;
 
-use bitt_mesh::{HandModel, HandPair, Side, UvLayout};
+use bitt_mesh::annotation::annotation_image_size;
+use bitt_mesh::{HandModel, HandPair, PinholeCamera, Side, UvLayout};
 use bitt_render::scene::LightValues;
 use bitt_texture::{SkinIdentity, TextureLayout, generate_texture, load_html_uvs, load_image};
 use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::BittError;
 use crate::error::WithContext;
+use crate::figure::FigureHand;
+
+/// The files and options `bitt render` makes a figure from (the hand models aside).
+#[derive(Debug, Clone, Copy)]
+pub struct FigureFiles<'a> {
+    /// HTML's UV file for models without a UV layout (MANO).
+    pub uvs: Option<&'a Path>,
+    /// HTML's UV file for the left hand (default: `uvs`).
+    pub uvs_left: Option<&'a Path>,
+    /// A BiTT/InterHand annotation; `None`: the built-in demo scene.
+    pub annotation: Option<&'a Path>,
+    /// The image size the annotation's intrinsics refer to (default: the image beside it).
+    pub image_size: Option<(u32, u32)>,
+    /// A UV texture for both hands; `None`: procedural skin of person `skin_seed`.
+    pub texture: Option<&'a Path>,
+    /// Person of the procedural skin.
+    pub skin_seed: u64,
+    /// Side of the procedural textures.
+    pub uv_size: usize,
+    /// An image of the camera's size to unwrap onto both hands.
+    pub unwrap: Option<&'a Path>,
+}
+
+/// What a figure is made of: both hands posed, their textures, the scene's camera and the
+/// image to unwrap.
+#[derive(Debug, Clone)]
+pub struct FigureInputs {
+    /// Both hands, posed in the camera frame.
+    pub hands: [FigureHand; 2],
+    /// One `[3, S, S]` texture per hand.
+    pub textures: Vec<Tensor<3>>,
+    /// The scene's camera.
+    pub camera: PinholeCamera,
+    /// The image to unwrap, `[3, H, W]` of the camera's size.
+    pub unwrap: Option<Tensor<3>>,
+}
+
+/// Reads and checks everything `files` names, for `models`: UV layouts, the scene (both
+/// hands posed), the textures and the image to unwrap.
+///
+/// # Errors
+/// A file that cannot be read or is not what it should be, a scene without both hands, or an
+/// image to unwrap that is not the camera's size.
+pub fn figure_inputs(
+    models: &HandPair,
+    files: &FigureFiles<'_>,
+    device: &Device,
+) -> Result<FigureInputs, BittError> {
+    let uvs = hand_uvs(models, files.uvs, files.uvs_left)?;
+    let scene = match files.annotation {
+        None => crate::demo::demo_scene(models),
+        Some(path) => {
+            let size = files
+                .image_size
+                .unwrap_or_else(|| annotation_image_size(path));
+            bitt_mesh::load_bitt_annotation(path, size)?
+        }
+    };
+    let posed = scene.pose_in_camera(models)?;
+    let hand = |side: Side, uv: &UvLayout| -> Result<FigureHand, BittError> {
+        let Some(posed) = posed.get(side) else {
+            return Err(BittError::Invalid(format!(
+                "{}: the scene has no {side} hand; bitt render needs both",
+                files
+                    .annotation
+                    .map_or("the demo scene".into(), |p| p.display().to_string())
+            )));
+        };
+        Ok(FigureHand {
+            side,
+            model: models.get(side).clone(),
+            uv: uv.clone(),
+            vertices: posed.vertices.clone(),
+        })
+    };
+    let hands = [hand(Side::Left, &uvs[0])?, hand(Side::Right, &uvs[1])?];
+    let textures = match files.texture {
+        Some(path) => {
+            let (t, _) = image_tensor(path, "--texture", device)?;
+            vec![t.clone(), t]
+        }
+        None => procedural_textures(models, &uvs, files.skin_seed, files.uv_size, device)?,
+    };
+    let camera = scene.camera;
+    let unwrap = match files.unwrap {
+        Some(path) => {
+            let (t, [h, w]) = image_tensor(path, "--unwrap", device)?;
+            if [h, w] != [camera.height as usize, camera.width as usize] {
+                return Err(BittError::Invalid(format!(
+                    "--unwrap {}: the image is {w}x{h}, but the camera renders {}x{}; \
+                     unwrap an image of the camera's size",
+                    path.display(),
+                    camera.width,
+                    camera.height
+                )));
+            }
+            Some(t)
+        }
+        None => None,
+    };
+    Ok(FigureInputs {
+        hands,
+        textures,
+        camera,
+        unwrap,
+    })
+}
 
 /// The light of `arg`: inline JSON when it looks like JSON (an object, an array, or anything
 /// else that parses as JSON and is not a file's name), else a JSON file.

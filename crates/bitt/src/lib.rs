@@ -24,7 +24,11 @@
 //!   a grid of orthographic views).
 //! - [`figure_inputs`]: what the figures are made of, read and checked (light, UV layouts,
 //!   images, procedural skin textures).
+//! - [`texture_model`]: `bitt texture`'s texture PCA model (a file or the procedural fit),
+//!   its parameters and the UV texture it makes.
 //! - [`plot`]: the loss plot (`loss.png`: axes, decade ticks, legend, learning-rate steps).
+//! - [`progress`]: progress on stderr (training, evaluation, refinement, keypoint fit, PCA fit,
+//!   a run's setup): a bar redrawn on a terminal, a plain line every 10 % in a log.
 //! - [`hand_layer`]: the hand model as a differentiable burn function (both hands batched).
 //! - [`refine`]: mesh refinement of both hands against the photo through the renderer.
 //! - [`hand_priors`]: joint-angle, off-axis and penetration priors shared by `refine` and `fit`.
@@ -63,11 +67,13 @@ pub mod outputs;
 pub mod pair_metrics;
 pub mod pipeline;
 pub mod plot;
+pub mod progress;
 pub mod real;
 pub mod refine;
 pub mod run;
 pub mod run_folder;
 pub mod saved;
+pub mod texture_model;
 pub mod train_scene;
 pub mod trainer;
 pub mod viewer;

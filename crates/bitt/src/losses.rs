@@ -103,8 +103,10 @@ pub fn loss(outputs: &Outputs, view: &TrainingView, w: &LossWeights) -> Loss {
         .expect("two hands");
     let alb = match &outputs.consistency_albedos {
         Some(a) => {
-            let one = |i: usize| a.clone().narrow(0, i, 1);
-            l1(one(0), one(1)) + l1(one(0), one(2)) + l1(one(1), one(2))
+            // Each image sliced once: a slice's gradient is a zero-padded copy of the whole
+            // batch, so six slices would cost six.
+            let [a0, a1, a2] = [0, 1, 2].map(|i| a.clone().narrow(0, i, 1));
+            l1(a0.clone(), a1.clone()) + l1(a0, a2.clone()) + l1(a1, a2)
         }
         None => rec_fine.zeros_like(),
     };

@@ -39,6 +39,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use bitt_mesh::st;
 
 use crate::BittError;
+use crate::error::WithContext;
 
 /// The VGG16 `features` indices of the 13 convolutions with their `(in, out)` channels.
 pub const VGG16_CONVS: [(usize, usize, usize); 13] = [
@@ -254,6 +255,17 @@ impl LpipsVgg {
         match default_weights_path() {
             Some(p) if p.is_file() => Self::load(&p, device).map(Some),
             _ => Ok(None),
+        }
+    }
+
+    /// The weights at `path` (`--lpips`), else [`LpipsVgg::find`]'s; an error is said to be
+    /// about `LPIPS weights FILE` (or `LPIPS weights`).
+    pub fn load_or_find(path: Option<&Path>, device: &Device) -> Result<Option<Self>, BittError> {
+        match path {
+            Some(p) => Self::load(p, device)
+                .map(Some)
+                .context_with(|| format!("LPIPS weights {}", p.display())),
+            None => Self::find(device).context_with(|| "LPIPS weights".to_string()),
         }
     }
 

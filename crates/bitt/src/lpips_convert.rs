@@ -3,6 +3,7 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
+use bitt_pickle::{ArrayData, Value};
 use burn::tensor::Device;
 
 use crate::BittError;
@@ -10,6 +11,35 @@ use crate::lpips::{self, LpipsVgg};
 
 /// The float tensors of a torch state dict: (name, shape, values as `f32`).
 pub type StateDict = Vec<(String, Vec<usize>, Vec<f32>)>;
+
+/// The float tensors of a torch checkpoint's state dict (values as `f32`), the reader
+/// [`convert`] takes.
+///
+/// # Errors
+/// A file that is not a torch checkpoint, or one that holds something else than a dict.
+pub fn torch_state_dict(path: &Path) -> Result<StateDict, BittError> {
+    let v = bitt_pickle::load_torch(path).map_err(|e| BittError::Invalid(e.to_string()))?;
+    let Value::Dict(items) = v else {
+        return Err(BittError::corrupt(
+            path,
+            format!(
+                "the checkpoint holds a {}, expected a state dict",
+                v.type_name()
+            ),
+        ));
+    };
+    let mut out = Vec::new();
+    for (k, t) in items {
+        let (Value::Str(name), Value::Array(a)) = (k, t) else {
+            continue;
+        };
+        if matches!(a.data, ArrayData::F32(_) | ArrayData::F64(_)) {
+            let shape = a.shape.clone();
+            out.push((name, shape, a.into_f32()));
+        }
+    }
+    Ok(out)
+}
 
 /// Where torch caches torchvision's VGG16 weights,
 /// `~/.cache/torch/hub/checkpoints/vgg16-397923af.pth` (relative without `HOME`).

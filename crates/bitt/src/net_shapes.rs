@@ -23,6 +23,11 @@ pub fn net_shapes(
     run: bool,
     device: &Device,
 ) -> Result<serde_json::Value, BittError> {
+    // flex's one random generator is shared: hold the trainer's lock on it while drawing
+    // (a trainer initialising on another thread would otherwise get shifted weights).
+    let _rng = crate::trainer::NETS_INIT
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
     let nets = config.init(device)?;
     let (s, t) = (config.image_size, config.num_texels);
     let image_shape = vec![1, 3, s, s];

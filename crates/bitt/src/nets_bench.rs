@@ -49,6 +49,36 @@ pub struct NetBench {
     pub seconds: Vec<f64>,
 }
 
+impl NetBench {
+    /// `bitt bench-nets`' JSON line: the network, `preset` and `device` as named on the
+    /// command line, `config`'s BTR convolution, the parameter count, input shape and timings.
+    pub fn report(
+        &self,
+        config: &BittNetsConfig,
+        preset: serde_json::Value,
+        device: serde_json::Value,
+    ) -> serde_json::Value {
+        serde_json::json!({
+            "net": self.net.name(),
+            "preset": preset,
+            "device": device,
+            "conv": format!("{:?}", config.btr.conv),
+            "params": self.params,
+            "input_shape": self.input_shape,
+            "seconds": self.seconds,
+        })
+    }
+}
+
+/// Holds the trainer's lock on flex's one random generator while networks and inputs are
+/// drawn: a draw here while a trainer initialises on another thread (tests run in
+/// parallel) would shift that trainer's weights.
+fn host_rng() -> std::sync::MutexGuard<'static, ()> {
+    crate::trainer::NETS_INIT
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+}
+
 fn mean_square<const D: usize>(t: Tensor<D>) -> Tensor<1> {
     t.square().mean()
 }
@@ -79,9 +109,14 @@ pub fn bench_net(
     let mut seconds = Vec::with_capacity(runs);
     let (params, input_shape) = match net {
         BenchedNet::Btr => {
-            let btr = config.btr.init(&device);
-            let left = Tensor::<3>::random([1, 3, t], Distribution::Default, &device);
-            let right = Tensor::<3>::random([1, 3, t], Distribution::Default, &device);
+            let (btr, left, right) = {
+                let _rng = host_rng();
+                (
+                    config.btr.init(&device),
+                    Tensor::<3>::random([1, 3, t], Distribution::Default, &device),
+                    Tensor::<3>::random([1, 3, t], Distribution::Default, &device),
+                )
+            };
             for _ in 0..runs {
                 seconds.push(time_once(|| {
                     let out = btr.forward(left.clone(), right.clone());
@@ -92,8 +127,13 @@ pub fn bench_net(
             (btr.num_params(), vec![1, 3, t])
         }
         BenchedNet::Albedo => {
-            let albedo = config.albedo.init(&device);
-            let image = Tensor::<4>::random([1, 3, s, s], Distribution::Default, &device);
+            let (albedo, image) = {
+                let _rng = host_rng();
+                (
+                    config.albedo.init(&device),
+                    Tensor::<4>::random([1, 3, s, s], Distribution::Default, &device),
+                )
+            };
             for _ in 0..runs {
                 seconds.push(time_once(|| {
                     let grads = mean_square(albedo.forward(image.clone())).backward();
@@ -103,12 +143,17 @@ pub fn bench_net(
             (albedo.num_params(), vec![1, 3, s, s])
         }
         BenchedNet::Step => {
-            let mut nets = config.init(&device)?;
+            let (mut nets, image, batch, left, right) = {
+                let _rng = host_rng();
+                (
+                    config.init(&device)?,
+                    Tensor::<4>::random([1, 3, s, s], Distribution::Default, &device),
+                    Tensor::<4>::random([4, 3, s, s], Distribution::Default, &device),
+                    Tensor::<3>::random([1, 3, t], Distribution::Default, &device),
+                    Tensor::<3>::random([1, 3, t], Distribution::Default, &device),
+                )
+            };
             let mut adam = Adam::new(crate::OptimConfig::default());
-            let image = Tensor::<4>::random([1, 3, s, s], Distribution::Default, &device);
-            let batch = Tensor::<4>::random([4, 3, s, s], Distribution::Default, &device);
-            let left = Tensor::<3>::random([1, 3, t], Distribution::Default, &device);
-            let right = Tensor::<3>::random([1, 3, t], Distribution::Default, &device);
             for _ in 0..runs {
                 seconds.push(time_once(|| {
                     let out = nets.btr.forward(left.clone(), right.clone());
@@ -198,6 +243,10 @@ mod tests {
         }
         let btr = bench_net(BenchedNet::Btr, &config, 1, &Device::flex()).unwrap();
         assert_eq!(btr.input_shape, vec![1, 3, config.num_texels]);
-        assert_eq!(btr.params, config.btr.init(&Device::flex()).num_params());
+        let params = {
+            let _rng = host_rng();
+            config.btr.init(&Device::flex()).num_params()
+        };
+        assert_eq!(btr.params, params);
     }
 }

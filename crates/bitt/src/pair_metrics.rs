@@ -1,13 +1,16 @@
 //! `bitt metrics`' comparison of two image files (optionally under a mask): the image
-//! metrics, the images LPIPS compares, and the JSON report.
+//! metrics, the images LPIPS compares, and the JSON report; `bitt image-diff`'s mean and
+//! largest absolute difference of two images.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use bitt_texture::{PlanarImage, load_image};
+use bitt_texture::{ImageDifference, PlanarImage, load_image};
+use burn::tensor::Device;
 use serde_json::json;
 
 use crate::BittError;
 use crate::error::WithContext;
+use crate::lpips::LpipsVgg;
 use crate::metrics::{
     ImageMetrics, MS_SSIM_MIN_SIDE, SsimWindow, apply_mask, image_metrics_with,
     masked_image_metrics,
@@ -38,6 +41,34 @@ impl ImagePair {
 
 fn load_planar(path: &Path, what: &str) -> Result<PlanarImage, BittError> {
     load_image(path).context_with(|| format!("cannot read {what} {}", path.display()))
+}
+
+/// The mean and largest absolute difference of images `a` and `b` of equal size (values in
+/// `[0, 1]`) and their means, as JSON (`bitt image-diff`; `cargo xtask e2e` compares backends
+/// with it).
+///
+/// # Errors
+/// An unreadable image, or images of different sizes.
+pub fn image_diff(a: &Path, b: &Path) -> Result<serde_json::Value, BittError> {
+    let ia = load_image(a).context_with(|| format!("cannot load {}", a.display()))?;
+    let ib = load_image(b).context_with(|| format!("cannot load {}", b.display()))?;
+    let Some(d) = ImageDifference::between(&ia, &ib) else {
+        return Err(BittError::Invalid(format!(
+            "{} is {}x{} but {} is {}x{}",
+            a.display(),
+            ia.width,
+            ia.height,
+            b.display(),
+            ib.width,
+            ib.height
+        )));
+    };
+    Ok(json!({
+        "mean_abs_diff": d.mean_abs_diff,
+        "max_abs_diff": d.max_abs_diff,
+        "mean_a": d.mean_a,
+        "mean_b": d.mean_b,
+    }))
 }
 
 /// Compares images `a` and `b` (the same size); with `mask` (the same size, pixels whose
@@ -100,6 +131,50 @@ pub fn compare_images(
         mask_pixels,
         lpips_inputs,
     })
+}
+
+/// The LPIPS weights of a comparison: `given` (`--lpips`), else `default` when that file
+/// exists.
+pub fn lpips_weights(given: Option<&Path>, default: Option<&Path>) -> Option<PathBuf> {
+    match given {
+        Some(p) => Some(p.to_path_buf()),
+        None => default.filter(|p| p.is_file()).map(Path::to_path_buf),
+    }
+}
+
+/// The note of a comparison without LPIPS weights (`default`: where they are looked for).
+pub fn no_lpips_note(default: Option<&Path>) -> String {
+    format!(
+        "LPIPS unavailable: no weights (pass --lpips FILE, set BITT_LPIPS_WEIGHTS, or \
+         write {} with `bitt convert-lpips`); it is not estimated",
+        default.map_or("~/.cache/bitt/lpips_vgg.safetensors".into(), |p| p
+            .display()
+            .to_string())
+    )
+}
+
+/// LPIPS-VGG of `pair` with the weights in `weights`, on `device`, and the note saying
+/// where they are from.
+///
+/// # Errors
+/// Weights that cannot be read, or a failure computing the distance.
+pub fn pair_lpips(
+    pair: &ImagePair,
+    weights: &Path,
+    device: &Device,
+) -> Result<(f64, String), BittError> {
+    let net = LpipsVgg::load(weights, device)?;
+    let (a, b) = &pair.lpips_inputs;
+    let d = net
+        .distance(a, b, pair.dims(), device)
+        .context_with(|| "computing LPIPS".to_string())?;
+    Ok((
+        d,
+        format!(
+            "LPIPS-VGG v0.1 from {}, inputs mapped from [0, 1] to [-1, 1]",
+            weights.display()
+        ),
+    ))
 }
 
 /// The JSON report of a comparison: paths, size, metrics (non-finite ones as `null` with a

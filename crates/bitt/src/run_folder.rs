@@ -202,6 +202,27 @@ impl RunInput {
     }
 }
 
+/// Refuses path arguments that are not valid UTF-8 (`paths`: each option and its path, if
+/// given) before anything is read or written: a run records its inputs' paths in
+/// `input.json` and `config.json` (JSON text).
+///
+/// # Errors
+/// The first path that is not valid UTF-8, naming its option.
+pub fn check_utf8_paths(paths: &[(&str, Option<&Path>)]) -> Result<(), BittError> {
+    for (flag, path) in paths {
+        if let Some(path) = path
+            && path.to_str().is_none()
+        {
+            return Err(BittError::Invalid(format!(
+                "{flag} {}: the path is not valid UTF-8; a run records its input paths as JSON \
+                 text. Rename it, or link it under a UTF-8 name",
+                path.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// A keypoint fit to record in the run folder: [`FIT_RECORD`] and its overlay.
 #[derive(Debug, Clone)]
 pub struct FitOutput {

@@ -11,6 +11,7 @@ use burn::tensor::Device;
 
 use crate::BittError;
 use crate::assets::HandAssets;
+use crate::evaluate::move_light;
 use crate::real::{RealAvatar, RealInput, render_textures};
 use crate::run::SavedAvatar;
 
@@ -21,6 +22,51 @@ pub enum SavedRun {
     Synthetic(Box<SavedAvatar>),
     /// A real run, with the assets (models, layouts) it was trained with.
     Real(Box<RealAvatar>, Box<HandAssets>),
+}
+
+/// How `bitt render-avatar` sees the avatar.
+#[derive(Debug, Clone)]
+pub struct AvatarView {
+    /// The pose and its camera (the training pose, a novel pose, another one).
+    pub pose: TwoHandScene,
+    /// Whether `pose` is in the training camera's world (the training pose and the scene's
+    /// novel poses), where the estimated light stays where it is; otherwise it keeps its
+    /// place relative to the camera, as estimated in the training view.
+    pub same_world: bool,
+    /// The camera orbited about the hands: azimuth and elevation in degrees.
+    pub orbit_deg: [f64; 2],
+    /// Side of the square image (default: the camera's); the intrinsics are scaled.
+    pub size: Option<u32>,
+    /// The light (camera frame of the rendered view) instead of the estimated one.
+    pub light: Option<LightValues>,
+}
+
+/// `camera` with its intrinsics scaled to a `size x size` image (`--size`).
+///
+/// # Errors
+/// A size outside 8..=4096, or a camera that is not square.
+pub fn resized(camera: &PinholeCamera, size: u32) -> Result<PinholeCamera, BittError> {
+    if !(8..=4096).contains(&size) {
+        return Err(BittError::Invalid(format!(
+            "--size must be between 8 and 4096 (got {size})"
+        )));
+    }
+    if camera.width != camera.height {
+        return Err(BittError::Invalid(format!(
+            "--size needs a square camera (got {}x{})",
+            camera.width, camera.height
+        )));
+    }
+    let s = f64::from(size) / f64::from(camera.width);
+    let mut k = camera.intrinsics * s;
+    k.z_axis.z = 1.0;
+    Ok(PinholeCamera::new(
+        k,
+        camera.rotation,
+        camera.translation,
+        size,
+        size,
+    )?)
 }
 
 impl SavedRun {
@@ -178,6 +224,35 @@ impl SavedRun {
         };
         let (l, r) = (betas(Side::Left), betas(Side::Right));
         crate::real::procedural_pose(&self.models(), family, [&l, &r], seed, self.image_size())
+    }
+
+    /// Renders the avatar in `view` (`bitt render-avatar`): its pose and camera, resized and
+    /// orbited, under the given light or the estimated one ([`AvatarView`]); `[3, H, W]` on
+    /// the host, and the camera it was seen through.
+    ///
+    /// # Errors
+    /// A size out of range or a camera that is not square, hands that cannot be posed or
+    /// rendered.
+    pub fn render_view(
+        &self,
+        view: &AvatarView,
+        device: &Device,
+    ) -> Result<(Vec<f32>, PinholeCamera), BittError> {
+        let mut base = view.pose.clone();
+        if let Some(n) = view.size {
+            base.camera = resized(&base.camera, n)?;
+        }
+        let models = self.models();
+        let [yaw, pitch] = view.orbit_deg.map(f64::to_radians);
+        let hands = crate::real::orbit_hands(&base, &models, yaw, pitch)?;
+        let light = match view.light {
+            Some(l) => l,
+            None if view.same_world => move_light(&self.light(), &self.camera(), &hands.camera),
+            // The estimated light, placed relative to the base camera as it was relative to
+            // the training camera, then kept in the world while the view orbits.
+            None => move_light(&self.light(), &base.camera, &hands.camera),
+        };
+        Ok((self.render(&hands, &light, device)?, hands.camera))
     }
 
     /// Renders the avatar's hands posed as `hands` (its camera included) under `light`;

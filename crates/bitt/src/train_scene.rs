@@ -21,14 +21,14 @@ use crate::fit::{
     FitObserver, KeypointSource, fit_keypoints, fit_photo, parse_intrinsics, record_synthetic_fit,
 };
 use crate::real::{
-    HandSource, PriorSource, RealInput, RealScores, annotation_setup, interhand_setup,
-    keypoint_setup, score_real,
+    HandSource, PriorSource, RealInput, RealRunSettings, RealScores, annotation_setup,
+    interhand_setup, keypoint_setup, score_real,
 };
 use crate::refine::{
     MeshRefine, RefineConfig, RefineObserver, Refinement, pca_pose_notes, refine_synthetic,
 };
 use crate::run::{RunSummary, files, synthetic_trainer, texture_prior_with_progress, write_run};
-use crate::run_folder::{FitOutput, RunInput, load_checkpoints};
+use crate::run_folder::{FitOutput, RunInput, load_checkpoints, write_fresh_run};
 use crate::trainer::Trainer;
 
 /// What the setup of a run tells on the way: lines for the user, and progress displays for
@@ -163,6 +163,15 @@ pub fn fresh_run(
 ) -> Result<FreshRun, BittError> {
     let cache = Some(request.cache);
     let (hands, prior) = (&request.hands, &request.prior);
+    if matches!(request.input, SceneInput::Synthetic { .. })
+        && (*hands != HandSource::Procedural || *prior != PriorSource::Procedural)
+    {
+        return Err(BittError::Invalid(
+            "--model-dir and --html-dir apply to real data: give --image IMG --annotation PKL \
+             or --interhand ROOT"
+                .into(),
+        ));
+    }
     let mut bar = observer.refine();
     let mut refine = request.refine.as_ref().map(|config| MeshRefine {
         config,
@@ -215,17 +224,15 @@ pub fn fresh_run(
             for n in &fit.fit.report.notes {
                 observer.say(&format!("note: {n}"));
             }
-            let setup = keypoint_setup(
-                &fit,
-                image,
-                path,
+            let settings = RealRunSettings {
                 hands,
                 prior,
                 config,
                 cache,
-                refine.take(),
+                refine: refine.take(),
                 device,
-            )?;
+            };
+            let setup = keypoint_setup(&fit, image, path, settings)?;
             let output = FitOutput {
                 record: fit.record(),
                 overlay: fit.overlay.clone(),
@@ -246,17 +253,15 @@ pub fn fresh_run(
                     PriorSource::Procedural => "procedural PCA",
                 },
             ));
-            let setup = annotation_setup(
-                image,
-                annotation,
+            let settings = RealRunSettings {
                 hands,
                 prior,
                 config,
                 cache,
-                refine.take(),
+                refine: refine.take(),
                 device,
-            )
-            .context_with(|| {
+            };
+            let setup = annotation_setup(image, annotation, settings).context_with(|| {
                 format!(
                     "real data --image {} --annotation {}",
                     image.display(),
@@ -294,16 +299,15 @@ pub fn fresh_run(
                 scene.novel_views.len(),
                 scene.novel_poses.len()
             ));
-            let setup = interhand_setup(
-                &scene,
-                &dataset.paths,
+            let settings = RealRunSettings {
                 hands,
                 prior,
                 config,
                 cache,
-                refine.take(),
+                refine: refine.take(),
                 device,
-            )?;
+            };
+            let setup = interhand_setup(&scene, &dataset.paths, settings)?;
             Ok(real(setup, None))
         }
         SceneInput::Synthetic { scene, keypoints } => {
@@ -499,6 +503,123 @@ pub fn resumed_run(
         checkpoint.iteration, trainer.config.iterations
     ));
     Ok((trainer, input))
+}
+
+/// A fresh run in `out`: its inputs read and checked and its trainer built ([`fresh_run`]),
+/// then its folder created with its first files ([`write_fresh_run`]); the refinement's
+/// notes and result are told to `observer`.
+///
+/// # Errors
+/// Any input that cannot be read or is not what it should be (nothing is written then), or
+/// a file that cannot be written.
+pub fn start_fresh(
+    out: &Path,
+    request: &FreshRequest<'_>,
+    config: TrainConfig,
+    device: &Device,
+    observer: &mut dyn SetupObserver,
+) -> Result<(Trainer, RunInput), BittError> {
+    // Every input is read and checked (and the trainer built) before the run folder is
+    // created, so a bad input leaves nothing behind.
+    let FreshRun {
+        trainer,
+        input,
+        refinement,
+        fit,
+    } = fresh_run(request, config, device, observer)?;
+    write_fresh_run(out, &trainer, &input, fit.as_ref(), refinement.as_ref())?;
+    if let Some(r) = &refinement {
+        for n in &r.report.notes {
+            observer.say(&format!("note: {n}"));
+        }
+        observer.say(&format!(
+            "refined the meshes in {:.1} s: silhouette IoU against the hand mask {:.4} -> {:.4}",
+            r.report.seconds, r.report.iou_before, r.report.iou_after
+        ));
+    }
+    Ok((trainer, input))
+}
+
+/// The line that says what a training is about to do.
+pub fn training_line(trainer: &Trainer) -> String {
+    let config = &trainer.config;
+    let [lv, rv] = trainer.view.visible_fraction();
+    format!(
+        "training {} iterations ({} preset, {} texels per hand, {} texture components, visible {:.0}% / {:.0}%)",
+        config.iterations,
+        config.preset,
+        trainer.assets.num_texels(),
+        config.nets.html.coefficients_per_hand,
+        100.0 * lv,
+        100.0 * rv
+    )
+}
+
+/// The error of a run whose training gave up (`error`) but whose results, those of
+/// `iteration`, were written into `out`.
+pub fn unfinished_error(error: &BittError, out: &Path, iteration: usize) -> BittError {
+    BittError::Invalid(format!(
+        "training did not finish: {error}. The results in {} are those of iteration {iteration}; \
+         `--resume {}` continues from there at the lowered learning rate",
+        out.display(),
+        out.display()
+    ))
+}
+
+/// The summary of a finished run for the user: where its results are, its timings and
+/// input-view PSNR, the novel views' and poses' scores (against the ground truth or the
+/// photographs), and a synthetic run's texture errors; `wall` is the whole command's seconds.
+pub fn summary_lines(
+    out: &Path,
+    s: &RunSummary,
+    real: Option<&RealScores>,
+    wall: f64,
+) -> Vec<String> {
+    let mut lines = vec![
+        format!(
+            "results in {}/ (open {}/report.html)",
+            out.display(),
+            out.display()
+        ),
+        format!(
+            "{} iterations, {:.1} s training, {:.1} s wall clock; input-view PSNR {:.2} dB",
+            s.iterations, s.seconds, wall, s.input_psnr
+        ),
+    ];
+    let means = match (&s.synthetic, real) {
+        (Some(g), _) => Some((&g.novel_views, &g.novel_poses)),
+        (None, Some(r)) => Some((&r.novel_views, &r.novel_poses)),
+        _ => None,
+    };
+    if let Some((views, poses)) = means {
+        let against = if real.is_some() { " (photographs)" } else { "" };
+        for (name, m) in [("novel views", views), ("novel poses", poses)] {
+            if let Some(m) = m {
+                lines.push(format!(
+                    "{name} ({}){against}: PSNR fine {:.2} dB vs coarse {:.2} dB; SSIM fine {:.4} vs coarse {:.4}",
+                    m.count, m.fine.psnr, m.coarse.psnr, m.fine.ssim, m.coarse.ssim
+                ));
+            }
+        }
+    }
+    if let Some(t) = s.synthetic.as_ref().and_then(|g| g.texture.as_ref()) {
+        let f = |v: Option<f64>| v.map_or("n/a".to_string(), |v| format!("{v:.4}"));
+        let (fine, coarse) = (&t.fine.gain_fitted, &t.coarse.gain_fitted);
+        lines.push(format!(
+            "texture L1 after a gain per channel, texels invisible in the input: fine {} vs coarse {} \
+             (visible on the other hand: fine {} vs coarse {}; invisible on both: fine {} vs coarse {}); \
+             raw: fine {} vs coarse {}",
+            f(fine.not_visible),
+            f(coarse.not_visible),
+            f(fine.symmetric),
+            f(coarse.symmetric),
+            f(fine.invisible),
+            f(coarse.invisible),
+            f(t.fine.raw.not_visible),
+            f(t.coarse.raw.not_visible),
+        ));
+    }
+    lines
 }
 
 /// Writes a trained run's results into `out` ([`write_run`]) and, for real data with novel

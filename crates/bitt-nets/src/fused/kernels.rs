@@ -94,7 +94,7 @@ fn batched_products(
     len: usize,
     taps: &[(MatRef<'_>, isize)],
 ) -> Vec<f32> {
-    let mut dst = vec![0.0f32; batch * rows_out * len];
+    let mut dst = super::zeros(batch * rows_out * len);
     if dst.is_empty() {
         return dst;
     }
@@ -503,7 +503,7 @@ pub(crate) fn norm_silu_forward(
     };
     let maps = row_maps(bias, gamma, beta, &stats, d);
     // Pass 2: y = silu(z scale + shift).
-    let mut y = vec![0.0f32; rows * d.len];
+    let mut y = super::zeros(rows * d.len);
     y.par_chunks_exact_mut(d.len)
         .zip(z.par_chunks_exact(d.len))
         .enumerate()

@@ -5,8 +5,11 @@
 //! `[C_in kh kw, tile]` stays in cache (one buffer per call, reused for every tile) and one
 //! GEMM writes the tile's columns of the output; a 1x1 stride-1 convolution is one GEMM over
 //! the input itself. The backward pass walks the same tiles: `dW += dz_tile col^T` and
-//! `dcol = W^T dz_tile`, scattered back (col2im) channel by channel in parallel. The GEMMs
-//! run multi-threaded on rayon's pool, the patch gathers and scatters parallel over rows.
+//! `dcol = W^T dz_tile`, scattered back (col2im) channel by channel in parallel. A batch with
+//! at least as many samples as threads runs one sample per thread with single-threaded
+//! GEMMs, a smaller one sample after sample with multi-threaded GEMMs; `dW`'s long pixel
+//! reduction is split into one run of tiles per thread. The patch gathers and scatters run
+//! parallel over rows.
 //! Instance norm + activation is one pass per `(sample, channel)` row forward (after the
 //! moments) and two backward, rows in parallel.
 
@@ -74,12 +77,25 @@ impl Conv2dDims {
         self.kernel == [1, 1] && self.stride == [1, 1] && self.padding == [0, 0]
     }
 
-    /// Output pixels per tile.
+    /// Output pixels per tile (all of them for a 1x1 convolution, which needs no patch
+    /// matrix).
     fn tile(&self) -> usize {
+        if self.pointwise() {
+            return self.pixels().max(1);
+        }
         (COL_BUDGET / self.patch().max(1))
             .max(MIN_TILE)
             .min(self.pixels())
             .max(1)
+    }
+
+    /// A patch-matrix buffer for one tile (empty for a 1x1 convolution, which needs none).
+    fn col_buffer(&self) -> Vec<f32> {
+        if self.pointwise() {
+            Vec::new()
+        } else {
+            vec![0.0; self.patch() * self.tile()]
+        }
     }
 
     /// The weight `[C_out, C_in kh kw]`.
@@ -238,66 +254,57 @@ pub(crate) fn conv2d_forward(x: &[f32], weight: &[f32], bias: &[f32], d: Conv2dD
         "conv2d_forward: bias"
     );
     let (pixels, k) = (d.pixels(), d.patch());
-    let mut z = vec![0.0f32; d.batch * d.c_out * pixels];
+    let mut z = super::zeros(d.batch * d.c_out * pixels);
     if z.is_empty() {
         return z;
     }
     let w = d.weight(weight);
-    if d.pointwise() {
-        for (xb, zb) in x
-            .chunks_exact(d.c_in * pixels)
-            .zip(z.chunks_exact_mut(d.c_out * pixels))
-        {
+    // One sample: `z_b = W col_b`, tile by tile (`parallel`: multi-threaded GEMMs).
+    let sample = |xb: &[f32], zb: &mut [f32], col: &mut [f32], parallel: bool| {
+        for p0 in (0..pixels).step_by(d.tile()) {
+            let n = d.tile().min(pixels - p0);
+            let cols = if d.pointwise() {
+                xb
+            } else {
+                im2col(xb, &d, p0, n, col);
+                &col[..k * n]
+            };
             matmul(
                 MatMut {
-                    data: zb,
+                    data: &mut zb[p0..],
                     rows: d.c_out,
-                    cols: pixels,
+                    cols: n,
                     row_stride: pixels,
                     col_stride: 1,
                 },
                 w,
                 MatRef {
-                    data: xb,
-                    rows: d.c_in,
-                    cols: pixels,
-                    row_stride: pixels,
+                    data: cols,
+                    rows: k,
+                    cols: n,
+                    row_stride: if d.pointwise() { pixels } else { n },
                     col_stride: 1,
                 },
                 false,
-                true,
+                parallel,
             );
         }
+    };
+    let samples = x
+        .par_chunks_exact(d.c_in * d.plane())
+        .zip(z.par_chunks_exact_mut(d.c_out * pixels));
+    if samples_in_parallel(d.batch) {
+        samples.for_each_init(
+            || d.col_buffer(),
+            |col, (xb, zb)| sample(xb, zb, col, false),
+        );
     } else {
-        let tile = d.tile();
-        let mut col = vec![0.0f32; k * tile];
+        let mut col = d.col_buffer();
         for (xb, zb) in x
             .chunks_exact(d.c_in * d.plane())
             .zip(z.chunks_exact_mut(d.c_out * pixels))
         {
-            for p0 in (0..pixels).step_by(tile) {
-                let n = tile.min(pixels - p0);
-                im2col(xb, &d, p0, n, &mut col);
-                matmul(
-                    MatMut {
-                        data: &mut zb[p0..],
-                        rows: d.c_out,
-                        cols: n,
-                        row_stride: pixels,
-                        col_stride: 1,
-                    },
-                    w,
-                    MatRef {
-                        data: &col[..k * n],
-                        rows: k,
-                        cols: n,
-                        row_stride: n,
-                        col_stride: 1,
-                    },
-                    false,
-                    true,
-                );
-            }
+            sample(xb, zb, &mut col, true);
         }
     }
     if !bias.is_empty() {
@@ -309,6 +316,15 @@ pub(crate) fn conv2d_forward(x: &[f32], weight: &[f32], bias: &[f32], d: Conv2dD
             });
     }
     z
+}
+
+/// Whether a batch runs one sample per rayon task with single-threaded GEMMs: when there
+/// are at least as many samples as threads (the albedo U-Net's batch of 4 on 2 cores), which
+/// keeps both cores busy through the patch gathers and GEMM packing as well. Otherwise the
+/// samples run in order with multi-threaded GEMMs.
+fn samples_in_parallel(batch: usize) -> bool {
+    let threads = rayon::current_num_threads();
+    threads > 1 && batch >= threads
 }
 
 /// Gradients of [`conv2d_forward`] with respect to the input and the weight (each only
@@ -325,136 +341,151 @@ pub(crate) fn conv2d_backward(
     need_dx: bool,
     need_dw: bool,
 ) -> (Option<Vec<f32>>, Option<Vec<f32>>) {
-    let (pixels, k) = (d.pixels(), d.patch());
-    assert_eq!(dz.len(), d.batch * d.c_out * pixels, "conv2d_backward: dz");
+    assert_eq!(
+        dz.len(),
+        d.batch * d.c_out * d.pixels(),
+        "conv2d_backward: dz"
+    );
     assert_eq!(x.len(), d.batch * d.c_in * d.plane(), "conv2d_backward: x");
-    assert_eq!(weight.len(), d.c_out * k, "conv2d_backward: w");
-    let mut dx = need_dx.then(|| vec![0.0f32; x.len()]);
+    assert_eq!(weight.len(), d.c_out * d.patch(), "conv2d_backward: w");
+    let mut dx = need_dx.then(|| super::zeros(x.len()));
     let mut dw = need_dw.then(|| vec![0.0f32; weight.len()]);
-    let wt = d.weight_t(weight);
-    // Columns `[p0, p0 + n)` of one sample's `dz` `[C_out, pixels]`.
-    fn dz_cols(gb: &[f32], rows: usize, pixels: usize, p0: usize, n: usize) -> MatRef<'_> {
-        MatRef {
-            data: &gb[p0..],
-            rows,
-            cols: n,
-            row_stride: pixels,
-            col_stride: 1,
-        }
-    }
-    fn dw_mat(dw: &mut [f32], rows: usize, k: usize) -> MatMut<'_> {
-        MatMut {
-            data: dw,
-            rows,
-            cols: k,
-            row_stride: k,
-            col_stride: 1,
-        }
-    }
-    if pixels == 0 || d.batch == 0 {
+    if d.pixels() == 0 || d.batch == 0 {
         return (dx, dw);
     }
-    if d.pointwise() {
-        for b in 0..d.batch {
-            let gb = &dz[b * d.c_out * pixels..(b + 1) * d.c_out * pixels];
-            let xb = &x[b * d.c_in * pixels..(b + 1) * d.c_in * pixels];
-            if let Some(dw) = dw.as_mut() {
-                // dW += dz_b x_b^T.
-                let xt = MatRef {
-                    data: xb,
-                    rows: pixels,
-                    cols: d.c_in,
-                    row_stride: 1,
-                    col_stride: pixels,
-                };
-                matmul(
-                    dw_mat(dw, d.c_out, k),
-                    dz_cols(gb, d.c_out, pixels, 0, pixels),
-                    xt,
-                    true,
-                    true,
-                );
-            }
-            if let Some(dx) = dx.as_mut() {
-                let dxb = MatMut {
-                    data: &mut dx[b * d.c_in * pixels..(b + 1) * d.c_in * pixels],
-                    rows: d.c_in,
-                    cols: pixels,
-                    row_stride: pixels,
-                    col_stride: 1,
-                };
-                matmul(
-                    dxb,
-                    wt,
-                    dz_cols(gb, d.c_out, pixels, 0, pixels),
-                    false,
-                    true,
-                );
-            }
-        }
-        return (dx, dw);
+    if let Some(dw) = dw.as_mut() {
+        weight_gradient(dz, x, d, dw);
     }
-    let tile = d.tile();
-    let mut col = if need_dw {
-        vec![0.0f32; k * tile]
-    } else {
-        Vec::new()
-    };
-    let mut dcol = if need_dx {
-        vec![0.0f32; k * tile]
-    } else {
-        Vec::new()
-    };
-    let plane = d.plane();
-    for b in 0..d.batch {
-        let gb = &dz[b * d.c_out * pixels..(b + 1) * d.c_out * pixels];
-        let xb = &x[b * d.c_in * plane..(b + 1) * d.c_in * plane];
-        for p0 in (0..pixels).step_by(tile) {
+    if let Some(dx) = dx.as_mut() {
+        input_gradient(dz, weight, d, dx);
+    }
+    (dx, dw)
+}
+
+/// Columns `[p0, p0 + n)` of one sample's `dz` `[C_out, pixels]`.
+fn dz_cols<'a>(gb: &'a [f32], d: &Conv2dDims, p0: usize, n: usize) -> MatRef<'a> {
+    MatRef {
+        data: &gb[p0..],
+        rows: d.c_out,
+        cols: n,
+        row_stride: d.pixels(),
+        col_stride: 1,
+    }
+}
+
+/// `dW = sum over tiles of dz_tile col_tile^T` (for a 1x1 convolution, `dz_b x_b^T` per
+/// sample). With at least as many tiles (of all samples) as threads, the tiles are cut into
+/// one contiguous run per thread, each run summed with single-threaded GEMMs into its own
+/// buffer, and the partial sums added in run order: the long pixel reduction is what a
+/// multi-threaded GEMM cannot split, so it would run on one core. With fewer tiles they run
+/// in order with multi-threaded GEMMs.
+///
+/// # Shapes
+/// - `dz`: `[B, C_out, OH, OW]`; `x`: `[B, C_in, H, W]`; `dw`: `[C_out, C_in kh kw]`, zeros
+fn weight_gradient(dz: &[f32], x: &[f32], d: Conv2dDims, dw: &mut [f32]) {
+    let (pixels, k, plane, tile) = (d.pixels(), d.patch(), d.plane(), d.tile());
+    let tiles: Vec<(usize, usize)> = (0..d.batch)
+        .flat_map(|b| (0..pixels).step_by(tile).map(move |p0| (b, p0)))
+        .collect();
+    let run = |dw: &mut [f32], tiles: &[(usize, usize)], col: &mut [f32], parallel: bool| {
+        for &(b, p0) in tiles {
             let n = tile.min(pixels - p0);
-            if let Some(dw) = dw.as_mut() {
-                im2col(xb, &d, p0, n, &mut col);
-                // dW += dz_tile col^T, col^T = [n, k].
-                let col_t = MatRef {
-                    data: &col[..k * n],
+            let gb = &dz[b * d.c_out * pixels..(b + 1) * d.c_out * pixels];
+            let xb = &x[b * d.c_in * plane..(b + 1) * d.c_in * plane];
+            // col^T = [n, k]; for a 1x1 convolution col is the sample itself.
+            let (cols, col_stride) = if d.pointwise() {
+                (xb, pixels)
+            } else {
+                im2col(xb, &d, p0, n, col);
+                (&col[..k * n], n)
+            };
+            matmul(
+                MatMut {
+                    data: dw,
+                    rows: d.c_out,
+                    cols: k,
+                    row_stride: k,
+                    col_stride: 1,
+                },
+                dz_cols(gb, &d, p0, n),
+                MatRef {
+                    data: cols,
                     rows: n,
                     cols: k,
                     row_stride: 1,
-                    col_stride: n,
-                };
-                matmul(
-                    dw_mat(dw, d.c_out, k),
-                    dz_cols(gb, d.c_out, pixels, p0, n),
-                    col_t,
-                    true,
-                    true,
-                );
-            }
-            if let Some(dx) = dx.as_mut() {
-                let dcol_mat = MatMut {
-                    data: &mut dcol[..k * n],
-                    rows: k,
-                    cols: n,
-                    row_stride: n,
-                    col_stride: 1,
-                };
-                matmul(
-                    dcol_mat,
-                    wt,
-                    dz_cols(gb, d.c_out, pixels, p0, n),
-                    false,
-                    true,
-                );
-                col2im_add(
-                    &dcol,
-                    &d,
-                    p0,
-                    n,
-                    &mut dx[b * d.c_in * plane..(b + 1) * d.c_in * plane],
-                );
-            }
+                    col_stride,
+                },
+                true,
+                parallel,
+            );
+        }
+    };
+    let threads = rayon::current_num_threads();
+    if threads > 1 && tiles.len() >= threads {
+        let partials: Vec<Vec<f32>> = tiles
+            .par_chunks(tiles.len().div_ceil(threads))
+            .map(|part| {
+                let mut acc = vec![0.0f32; dw.len()];
+                run(&mut acc, part, &mut d.col_buffer(), false);
+                acc
+            })
+            .collect();
+        for part in &partials {
+            dw.iter_mut().zip(part).for_each(|(a, v)| *a += v);
+        }
+    } else {
+        run(dw, &tiles, &mut d.col_buffer(), true);
+    }
+}
+
+/// `dx_b = col2im(W^T dz_b)`, tile by tile; samples run in parallel as in the forward pass
+/// (each owns its `dx_b`).
+///
+/// # Shapes
+/// - `dz`: `[B, C_out, OH, OW]`; `weight`: `[C_out, C_in, kh, kw]`; `dx`: `[B, C_in, H, W]`,
+///   zeros
+fn input_gradient(dz: &[f32], weight: &[f32], d: Conv2dDims, dx: &mut [f32]) {
+    let (pixels, k, tile) = (d.pixels(), d.patch(), d.tile());
+    let wt = d.weight_t(weight);
+    let sample = |gb: &[f32], dxb: &mut [f32], dcol: &mut [f32], parallel: bool| {
+        if d.pointwise() {
+            let dxb = MatMut {
+                data: dxb,
+                rows: d.c_in,
+                cols: pixels,
+                row_stride: pixels,
+                col_stride: 1,
+            };
+            matmul(dxb, wt, dz_cols(gb, &d, 0, pixels), false, parallel);
+            return;
+        }
+        for p0 in (0..pixels).step_by(tile) {
+            let n = tile.min(pixels - p0);
+            let dcol_mat = MatMut {
+                data: &mut dcol[..k * n],
+                rows: k,
+                cols: n,
+                row_stride: n,
+                col_stride: 1,
+            };
+            matmul(dcol_mat, wt, dz_cols(gb, &d, p0, n), false, parallel);
+            col2im_add(dcol, &d, p0, n, dxb);
+        }
+    };
+    let (dz_len, dx_len) = (d.c_out * pixels, d.c_in * d.plane());
+    if samples_in_parallel(d.batch) {
+        dz.par_chunks_exact(dz_len)
+            .zip(dx.par_chunks_exact_mut(dx_len))
+            .for_each_init(
+                || d.col_buffer(),
+                |dcol, (gb, dxb)| sample(gb, dxb, dcol, false),
+            );
+    } else {
+        let mut dcol = d.col_buffer();
+        for (gb, dxb) in dz.chunks_exact(dz_len).zip(dx.chunks_exact_mut(dx_len)) {
+            sample(gb, dxb, &mut dcol, true);
         }
     }
-    (dx, dw)
 }
 
 /// The activation after the (normalised) convolution.
@@ -644,7 +675,7 @@ pub(crate) fn post_forward(
         None => (vec![0.0; rows], vec![1.0; rows]),
     };
     let stats = RowStats { mean, rstd };
-    let mut y = vec![0.0f32; z.len()];
+    let mut y = super::zeros(z.len());
     y.par_chunks_exact_mut(len)
         .zip(z.par_chunks_exact(len))
         .enumerate()

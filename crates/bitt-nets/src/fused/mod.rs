@@ -289,6 +289,19 @@ fn values(t: &FlexTensor) -> Vec<f32> {
         .to_vec()
 }
 
+/// A zeroed output buffer of `len` floats, cleared by rayon's threads in parallel. The
+/// allocator keeps freed memory, so a large buffer comes back dirty and must be cleared; one
+/// thread clearing it (what `vec![0.0; len]` does) kept the other core idle.
+pub(crate) fn zeros(len: usize) -> Vec<f32> {
+    use rayon::iter::ParallelExtend;
+    if len < 1 << 16 {
+        return vec![0.0; len];
+    }
+    let mut v = Vec::with_capacity(len);
+    v.par_extend(rayon::iter::repeat_n(0.0f32, len));
+    v
+}
+
 fn flex_tensor<const D: usize>(values: Vec<f32>, shape: [usize; D]) -> FlexTensor {
     FlexTensor::from_data(TensorData::new(values, shape))
 }

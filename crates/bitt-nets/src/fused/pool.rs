@@ -78,7 +78,7 @@ fn forward(x: &FlexTensor, d: PoolDims) -> (FlexTensor, Vec<bool>) {
 /// The pooling on a row-major `[rows, len]` slice: outputs `[rows, len / 2]` and the picks.
 fn pool_rows(x: &[f32], rows: usize, len: usize) -> (Vec<f32>, Vec<bool>) {
     let half = len / 2;
-    let mut y = vec![0.0f32; rows * half];
+    let mut y = super::zeros(rows * half);
     let mut picks = vec![false; rows * half];
     if half == 0 {
         return (y, picks);
@@ -100,7 +100,7 @@ fn pool_rows(x: &[f32], rows: usize, len: usize) -> (Vec<f32>, Vec<bool>) {
 /// gradient goes to the texel that won, zero elsewhere.
 fn unpool_rows(g: &[f32], picks: &[bool], rows: usize, len: usize) -> Vec<f32> {
     let half = len / 2;
-    let mut dx = vec![0.0f32; rows * len];
+    let mut dx = super::zeros(rows * len);
     if half == 0 {
         return dx;
     }

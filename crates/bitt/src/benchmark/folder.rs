@@ -13,6 +13,17 @@ use crate::baselines::BaselineConfig;
 use crate::config::TrainConfig;
 use crate::outputs::{contact_sheet, write_json, write_png};
 
+/// Parses `--scenes`: a positive number (the first N scenes), or `all` (the synthetic
+/// benchmark's [`bitt_synth::BENCHMARK_SCENES`]).
+pub fn parse_scenes(s: &str) -> Result<usize, BittError> {
+    match s {
+        "all" => Ok(bitt_synth::BENCHMARK_SCENES),
+        n => n.parse::<usize>().ok().filter(|&n| n >= 1).ok_or_else(|| {
+            BittError::Invalid(format!("--scenes {n}: expected a positive number or `all`"))
+        }),
+    }
+}
+
 /// Parses a shard `i/N` (0-based): scene `k` belongs to shard `k % N`.
 pub fn parse_shard(s: &str) -> Result<(usize, usize), BittError> {
     let invalid = |why: String| BittError::Invalid(format!("--shard {s}: {why}"));

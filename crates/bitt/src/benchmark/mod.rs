@@ -32,12 +32,15 @@ mod scenes;
 
 pub use aggregate::{MeanMetrics, MethodSummary, Paired, Summary, TexelStatsMean, summarize};
 pub use folder::{
-    EvalPlan, interhand_scene_id, merge, parse_shard, pending, prepare_folder, result_path,
-    shard_seeds, trainings_per_scene, write_scene, write_sheet,
+    EvalPlan, interhand_scene_id, merge, parse_scenes, parse_shard, pending, prepare_folder,
+    result_path, shard_seeds, trainings_per_scene, write_scene, write_sheet,
 };
 pub use markdown::{claims, results_markdown};
 pub use methods::{ContactSheets, SceneSheets, SheetImages, evaluate_real_scene, evaluate_scene};
-pub use scenes::{EvalObserver, EvalRun, InterHandScenes, evaluate_interhand, evaluate_synthetic};
+pub use scenes::{
+    EvalObserver, EvalRun, EvalSource, Evaluation, InterHandScenes, evaluate_interhand,
+    evaluate_synthetic, run_evaluation,
+};
 
 /// A method of the comparison (Tables 1 and 4).
 #[derive(

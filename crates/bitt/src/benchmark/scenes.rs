@@ -1,7 +1,8 @@
 //! An evaluation's scenes one after another: the synthetic benchmark's seeds and mesh
 //! settings ([`evaluate_synthetic`]) or one InterHand2.6M scene per capture
 //! ([`evaluate_interhand`]), this shard's only, each skipped when its result is already in
-//! the folder and written there when done.
+//! the folder and written there when done; [`run_evaluation`] is `bitt eval` from the
+//! folder's plan to its merged tables.
 
 use std::path::Path;
 
@@ -11,7 +12,8 @@ use bitt_texture::FitProgress;
 use burn::tensor::Device;
 
 use super::folder::{
-    interhand_scene_id, pending, result_path, shard_seeds, trainings_per_scene, write_scene,
+    EvalPlan, interhand_scene_id, merge, pending, prepare_folder, result_path, shard_seeds,
+    trainings_per_scene, write_scene,
 };
 use super::methods::{evaluate_real_scene, evaluate_scene};
 use super::{MeshSetting, Method};
@@ -20,7 +22,7 @@ use crate::baselines::BaselineConfig;
 use crate::config::TrainConfig;
 use crate::error::WithContext;
 use crate::lpips::LpipsVgg;
-use crate::real::{HandSource, PriorSource, interhand_views, load_models, real_trainer};
+use crate::real::{HandSource, PriorSource, interhand_views, load_models, real_trainer, sources};
 use crate::run::texture_prior_with_progress;
 use crate::trainer::Observer;
 
@@ -248,4 +250,103 @@ pub fn evaluate_interhand(
         )));
     }
     Ok(())
+}
+
+/// Where `bitt eval`'s scenes come from.
+#[derive(Debug, Clone, Copy)]
+pub enum EvalSource<'a> {
+    /// The synthetic benchmark.
+    Synthetic,
+    /// InterHand2.6M, one scene per capture.
+    InterHand {
+        /// The dataset's root (`None`: not given, refused once the folder is prepared).
+        root: Option<&'a Path>,
+        /// Its split.
+        split: &'a str,
+        /// MANO's folder (`None`: the procedural hands).
+        model_dir: Option<&'a Path>,
+        /// HTML's folder (`None`: the procedural texture PCA).
+        html_dir: Option<&'a Path>,
+        /// Every capture with a usable scene, rather than the first `scenes`.
+        all: bool,
+    },
+}
+
+/// `bitt eval`'s request: what every scene shares, how many scenes of which source, and
+/// the LPIPS weights (`None`: the default weights when they exist).
+#[derive(Debug, Clone, Copy)]
+pub struct Evaluation<'a> {
+    /// What every scene shares; its `lpips` is the one [`run_evaluation`] loads from
+    /// `lpips` below.
+    pub run: EvalRun<'a>,
+    /// How many scenes.
+    pub scenes: usize,
+    /// LPIPS-VGG weights (`--lpips`).
+    pub lpips: Option<&'a Path>,
+    /// Where the scenes come from.
+    pub source: EvalSource<'a>,
+}
+
+/// Runs `evaluation`: writes its plan into the folder, loads LPIPS (saying when there are no
+/// weights), evaluates this shard's scenes that have no result yet on `device` (an autodiff
+/// device), then merges the folder's results; returns the tables (`results.md`).
+///
+/// # Errors
+/// The folder, the LPIPS weights, InterHand2.6M without a root, or any scene's evaluation.
+pub fn run_evaluation(
+    evaluation: &Evaluation<'_>,
+    device: &Device,
+    observer: &mut dyn EvalObserver,
+) -> Result<String, BittError> {
+    let e = evaluation;
+    let dataset = match e.source {
+        EvalSource::Synthetic => "synthetic".to_string(),
+        EvalSource::InterHand { root, split, .. } => format!(
+            "interhand {split} {}",
+            root.map_or(String::new(), |r| r.display().to_string())
+        ),
+    };
+    let plan = EvalPlan {
+        train: e.run.config,
+        baseline: e.run.baseline,
+        methods: e.run.methods,
+        settings: e.run.settings,
+        scenes: e.scenes,
+        dataset: &dataset,
+    };
+    prepare_folder(e.run.out, &plan)?;
+    let lpips = LpipsVgg::load_or_find(e.lpips, &device.clone().inner())?;
+    if lpips.is_none() {
+        observer.say("no LPIPS weights (see `bitt convert-lpips`): LPIPS is reported as n/a");
+    }
+    let run = EvalRun {
+        lpips: lpips.as_ref(),
+        ..e.run
+    };
+    match e.source {
+        EvalSource::Synthetic => evaluate_synthetic(&run, e.scenes, device, observer)?,
+        EvalSource::InterHand {
+            root,
+            split,
+            model_dir,
+            html_dir,
+            all,
+        } => {
+            let root = root.ok_or_else(|| {
+                BittError::Invalid(
+                    "--dataset interhand needs --root (the InterHand2.6M folder)".into(),
+                )
+            })?;
+            let (hands, prior) = sources(model_dir, html_dir);
+            let data = InterHandScenes {
+                root,
+                split,
+                hands,
+                prior,
+                scenes: (!all).then_some(e.scenes),
+            };
+            evaluate_interhand(&run, &data, device, observer)?;
+        }
+    }
+    merge(&[e.run.out.to_path_buf()])
 }

@@ -233,6 +233,35 @@ pub struct SceneFitResult {
     pub hands: Vec<super::HandFitReport>,
 }
 
+impl SceneFitResult {
+    /// The scene's line for the user; `dir` names the scene.
+    pub fn line(&self, dir: &Path) -> String {
+        let scores = &self.scores;
+        format!(
+            "{}: 2D joints {:.2} px, root-relative 3D {:.1} mm (max {:.1}), min flexion {:.0} deg ({} bent backwards), {:.1} s",
+            dir.display(),
+            scores.joint_2d_px,
+            scores.joint_3d_mm,
+            scores.max_joint_3d_mm,
+            scores.min_flexion_deg,
+            scores.bent_backwards,
+            self.seconds
+        )
+    }
+}
+
+/// The line for the user of [`fit_eval_summary`] over `scenes` scenes.
+pub fn fit_eval_line(scenes: usize, summary: &serde_json::Value) -> String {
+    format!(
+        "mean over {scenes} scenes: 2D joints {:.2} px, root-relative 3D {:.1} mm, {} joints bent backwards, {:.1} s per fit ({} intrinsics)",
+        summary["mean_joint_2d_px"].as_f64().unwrap_or(f64::NAN),
+        summary["mean_joint_3d_mm"].as_f64().unwrap_or(f64::NAN),
+        summary["bent_backwards"],
+        summary["mean_seconds"].as_f64().unwrap_or(f64::NAN),
+        summary["intrinsics"].as_str().unwrap_or("true"),
+    )
+}
+
 /// Reads each synthetic scene folder ([`SynthScene::read`]) and fits it
 /// ([`fit_synthetic_scene`], named by its path, silently); `on_scene` sees each result when
 /// it is done.

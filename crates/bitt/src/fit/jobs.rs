@@ -89,6 +89,32 @@ pub struct PhotoFit {
 }
 
 impl PhotoFit {
+    /// What the fit did, as lines for the user (its notes, the camera, each hand's residual,
+    /// the mask refinement's IoU, where the files are: `out`).
+    pub fn report_lines(&self, out: &Path) -> Vec<String> {
+        let report = &self.fit.report;
+        let mut lines: Vec<String> = report.notes.iter().map(|n| format!("note: {n}")).collect();
+        lines.push(format!("camera: {}", self.camera_source));
+        for h in &report.hands {
+            lines.push(format!(
+                "{} hand: {} keypoints, residual {:.2} px mean ({:.2} max), wrist at {:.3} m",
+                h.side, h.keypoints, h.mean_residual_px, h.max_residual_px, h.wrist_depth_m
+            ));
+        }
+        if let Some(r) = &self.refinement {
+            lines.push(format!(
+                "mask refinement: silhouette IoU {:.4} -> {:.4}",
+                r.iou_before, r.iou_after
+            ));
+        }
+        lines.push(format!(
+            "fitted in {:.1} s; wrote {out}/hands.json (use it as --annotation), {out}/fit.json and {out}/overlay.png",
+            report.seconds,
+            out = out.display()
+        ));
+        lines
+    }
+
     /// The record `fit.json` holds.
     pub fn record(&self) -> serde_json::Value {
         serde_json::json!({

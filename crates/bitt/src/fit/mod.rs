@@ -42,8 +42,8 @@ use crate::hand_priors::{FLEXION_RANGE, HandPriors, flexion_angles, flexion_axes
 use crate::optim::Adam;
 
 pub use eval::{
-    FitScores, SceneFitResult, SyntheticFitSettings, SyntheticKeypoints, fit_eval_summary,
-    fit_synthetic_scene, fit_synthetic_scenes, record_synthetic_fit, score_fit,
+    FitScores, SceneFitResult, SyntheticFitSettings, SyntheticKeypoints, fit_eval_line,
+    fit_eval_summary, fit_synthetic_scene, fit_synthetic_scenes, record_synthetic_fit, score_fit,
     synthetic_keypoints, write_fit_eval,
 };
 pub use jobs::{

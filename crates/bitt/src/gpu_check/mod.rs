@@ -169,6 +169,21 @@ pub struct StageReport {
     pub data: serde_json::Value,
 }
 
+impl StageReport {
+    /// The stage's progress line: `gpu-check NAME: ok (S s)` or `FAILED (S s): why`.
+    pub fn progress_line(&self) -> String {
+        match self.status {
+            StageStatus::Ok => format!("gpu-check {}: ok ({:.1} s)", self.name, self.seconds),
+            StageStatus::Failed => format!(
+                "gpu-check {}: FAILED ({:.1} s): {}",
+                self.name,
+                self.seconds,
+                self.error.as_deref().unwrap_or("")
+            ),
+        }
+    }
+}
+
 /// The whole check.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct GpuCheckReport {

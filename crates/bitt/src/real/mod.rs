@@ -85,7 +85,7 @@ pub use prior::{
 pub use record::{INPUT_FORMAT, RealInput, RealSource, ViewRecord, files};
 pub use score::{RealScores, hand_masks, score_real};
 pub use setup::{
-    RealSetup, annotation_setup, interhand_setup, keypoint_setup, real_trainer,
+    RealRunSettings, RealSetup, annotation_setup, interhand_setup, keypoint_setup, real_trainer,
     refined_real_trainer,
 };
 pub use view::{

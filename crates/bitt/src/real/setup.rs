@@ -17,6 +17,67 @@ use crate::config::TrainConfig;
 use crate::refine::{MeshRefine, Refinement, refine_view};
 use crate::trainer::Trainer;
 
+/// What every fresh real run's setup shares ([`annotation_setup`], [`keypoint_setup`],
+/// [`interhand_setup`]): where the hand models and the texture prior come from, the training
+/// configuration, the cache of fitted texture PCAs, an optional mesh refinement of the
+/// training view, and the device (an autodiff device).
+#[derive(Debug)]
+pub struct RealRunSettings<'a> {
+    /// The hand models.
+    pub hands: &'a HandSource,
+    /// The texture prior.
+    pub prior: &'a PriorSource,
+    /// The training configuration (adapted to the prior; see the [module docs](super)).
+    pub config: TrainConfig,
+    /// Cache of fitted texture PCAs (`None`: fit every time).
+    pub cache: Option<&'a Path>,
+    /// A mesh refinement of the training view before training.
+    pub refine: Option<MeshRefine<'a>>,
+    /// The training device.
+    pub device: &'a Device,
+}
+
+impl RealRunSettings<'_> {
+    /// The trainer of the training view `image` of `hands` (refined first when asked; the
+    /// refined hands replace `hands`), as [`refined_real_trainer`].
+    fn trainer(
+        self,
+        image: &[f32],
+        hands: &mut TwoHandScene,
+        models: HandPair,
+    ) -> Result<(Trainer, Option<Refinement>), BittError> {
+        refined_real_trainer(
+            image,
+            hands,
+            models,
+            self.prior,
+            self.config,
+            self.cache,
+            self.refine,
+            self.device,
+        )
+    }
+}
+
+impl<'a> RealRunSettings<'a> {
+    /// Settings without a cache or a refinement.
+    pub fn new(
+        hands: &'a HandSource,
+        prior: &'a PriorSource,
+        config: TrainConfig,
+        device: &'a Device,
+    ) -> Self {
+        RealRunSettings {
+            hands,
+            prior,
+            config,
+            cache: None,
+            refine: None,
+            device,
+        }
+    }
+}
+
 /// A trainer for one prepared view: hand assets of `models` at the preset's texture size, the
 /// prior of `prior` on their layout (the configuration adapted to it; see the
 /// [module docs](super)). `device` must be an autodiff device.
@@ -95,52 +156,30 @@ pub struct RealSetup {
 }
 
 /// A fresh real run from an image and its BiTT annotation pickle.
-#[allow(clippy::too_many_arguments)]
 pub fn annotation_setup(
     image: &Path,
     annotation: &Path,
-    hands: &HandSource,
-    prior: &PriorSource,
-    config: TrainConfig,
-    cache: Option<&Path>,
-    refine: Option<MeshRefine<'_>>,
-    device: &Device,
+    settings: RealRunSettings<'_>,
 ) -> Result<RealSetup, BittError> {
-    let models = load_models(hands, prior)?;
-    let view = annotation_view(image, annotation, &models, config.nets.image_size)?;
+    let models = load_models(settings.hands, settings.prior)?;
+    let view = annotation_view(image, annotation, &models, settings.config.nets.image_size)?;
     let source = RealSource::Annotation {
         image: absolute(image),
         annotation: absolute(annotation),
     };
-    single_view_setup(
-        view, source, image, models, hands, prior, config, cache, refine, device,
-    )
+    single_view_setup(view, source, image, models, settings)
 }
 
 /// The setup of a run on one prepared view (`image` is its photo).
-#[allow(clippy::too_many_arguments)]
 fn single_view_setup(
     mut view: RealView,
     source: RealSource,
     image: &Path,
     models: HandPair,
-    hands: &HandSource,
-    prior: &PriorSource,
-    config: TrainConfig,
-    cache: Option<&Path>,
-    refine: Option<MeshRefine<'_>>,
-    device: &Device,
+    settings: RealRunSettings<'_>,
 ) -> Result<RealSetup, BittError> {
-    let (trainer, refinement) = refined_real_trainer(
-        &view.image,
-        &mut view.hands,
-        models,
-        prior,
-        config,
-        cache,
-        refine,
-        device,
-    )?;
+    let (hands, prior) = (settings.hands, settings.prior);
+    let (trainer, refinement) = settings.trainer(&view.image, &mut view.hands, models)?;
     Ok(RealSetup {
         refinement,
         input: RealInput {
@@ -169,17 +208,11 @@ fn single_view_setup(
 ///
 /// # Errors
 /// A fit without both hands, hands outside the image; as [`real_trainer`].
-#[allow(clippy::too_many_arguments)]
 pub fn keypoint_setup(
     fit: &crate::fit::PhotoFit,
     image: &Path,
     keypoints: &Path,
-    hands: &HandSource,
-    prior: &PriorSource,
-    config: TrainConfig,
-    cache: Option<&Path>,
-    refine: Option<MeshRefine<'_>>,
-    device: &Device,
+    settings: RealRunSettings<'_>,
 ) -> Result<RealSetup, BittError> {
     for side in Side::BOTH {
         if fit.hands.hand(side).is_none() {
@@ -197,42 +230,27 @@ pub fn keypoint_setup(
         fit.image.clone(),
         &fit.hands,
         &models,
-        config.nets.image_size,
+        settings.config.nets.image_size,
     )?;
     let source = RealSource::Keypoints {
         image: absolute(image),
         keypoints: absolute(keypoints),
         mirrored: fit.mirrored,
     };
-    single_view_setup(
-        view, source, image, models, hands, prior, config, cache, refine, device,
-    )
+    single_view_setup(view, source, image, models, settings)
 }
 
 /// A fresh real run from a selected InterHand2.6M scene.
-#[allow(clippy::too_many_arguments)]
 pub fn interhand_setup(
     scene: &InterHandScene,
     paths: &bitt_mesh::interhand::InterHandPaths,
-    hands: &HandSource,
-    prior: &PriorSource,
-    config: TrainConfig,
-    cache: Option<&Path>,
-    refine: Option<MeshRefine<'_>>,
-    device: &Device,
+    settings: RealRunSettings<'_>,
 ) -> Result<RealSetup, BittError> {
+    let (hands, prior) = (settings.hands, settings.prior);
     let models = load_models(hands, prior)?;
-    let mut views = interhand_views(scene, &models, config.nets.image_size)?;
-    let (trainer, refinement) = refined_real_trainer(
-        &views.train.image,
-        &mut views.train.hands,
-        models,
-        prior,
-        config,
-        cache,
-        refine,
-        device,
-    )?;
+    let mut views = interhand_views(scene, &models, settings.config.nets.image_size)?;
+    let (trainer, refinement) =
+        settings.trainer(&views.train.image, &mut views.train.hands, models)?;
     let record = |v: &RealView| ViewRecord {
         source: absolute(&v.source),
         ..ViewRecord::from(v)

@@ -45,6 +45,37 @@ pub struct SceneRefinement {
 }
 
 impl SceneRefinement {
+    /// Writes the refined hands, `refine.json` and the overlay into `out`
+    /// ([`write_refine_outputs`]; the scene's hands are the procedural ones).
+    ///
+    /// # Errors
+    /// As [`write_refine_outputs`].
+    pub fn write(&self, out: &Path) -> Result<(), BittError> {
+        write_refine_outputs(
+            out,
+            &procedural_pair(),
+            &self.refinement.hands,
+            &self.record(),
+            &self.overlay,
+        )
+    }
+
+    /// What the refinement did, as lines for the user: its notes, the projected vertex error
+    /// and the silhouette IoU against the true meshes.
+    pub fn report_lines(&self) -> Vec<String> {
+        let mut lines = notes(&self.refinement);
+        let (b, a) = (self.vertex_error_before, self.vertex_error_after);
+        lines.push(format!(
+            "projected vertex error: {:.2} px mean ({:.2} max) before, {:.2} px mean ({:.2} max) after",
+            b.0, b.1, a.0, a.1
+        ));
+        lines.push(format!(
+            "silhouette IoU against the true meshes: {:.4} before, {:.4} after; {:.1} s",
+            self.iou_truth_before, self.iou_truth_after, self.refinement.report.seconds
+        ));
+        lines
+    }
+
     /// The record `refine.json` holds.
     pub fn record(&self) -> serde_json::Value {
         serde_json::json!({
@@ -158,7 +189,43 @@ pub struct PhotoRefinement {
     pub overlay: (Vec<f32>, [usize; 2]),
 }
 
+/// A refinement's notes as lines for the user.
+fn notes(refinement: &Refinement) -> Vec<String> {
+    refinement
+        .report
+        .notes
+        .iter()
+        .map(|n| format!("note: {n}"))
+        .collect()
+}
+
 impl PhotoRefinement {
+    /// Writes the refined hands, `refine.json` and the overlay into `out`
+    /// ([`write_refine_outputs`]).
+    ///
+    /// # Errors
+    /// As [`write_refine_outputs`].
+    pub fn write(&self, out: &Path) -> Result<(), BittError> {
+        write_refine_outputs(
+            out,
+            &self.models,
+            &self.refinement.hands,
+            &self.record(),
+            &self.overlay,
+        )
+    }
+
+    /// What the refinement did at `size` x `size`, as lines for the user: its notes and the
+    /// silhouette IoU against the mask.
+    pub fn report_lines(&self, size: usize) -> Vec<String> {
+        let mut lines = notes(&self.refinement);
+        lines.push(format!(
+            "silhouette IoU against the mask ({}): {:.4} before, {:.4} after; {:.1} s at {size}x{size}",
+            self.mask_source, self.iou_before, self.iou_after, self.refinement.report.seconds
+        ));
+        lines
+    }
+
     /// The record `refine.json` holds.
     pub fn record(&self) -> serde_json::Value {
         serde_json::json!({

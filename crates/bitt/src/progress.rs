@@ -1,18 +1,22 @@
 //! Progress on stderr: a bar redrawn in place on a terminal, plain lines every 10 % in a log.
 
 use std::io::Write;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use bitt::fit::{FitObserver, FitProgress};
-use bitt::refine::{RefineObserver, RefineProgress};
-use bitt::train_scene::SetupObserver;
+use crate::benchmark::EvalObserver;
+use crate::fit::{FitObserver, FitProgress};
+use crate::refine::{RefineObserver, RefineProgress};
+use crate::train_scene::SetupObserver;
+use crate::{Observer, Progress};
 
 /// One progress line on stderr. On a terminal the bar is redrawn in place; when stderr is
 /// not a terminal (CI logs, `| tee`, Slurm output files) it prints one plain line at the first
 /// step, whenever another 10 % is done, and at the end, instead of carriage-return redraws
 /// that would make a whole run one long line.
 #[derive(Debug)]
-pub(crate) struct ProgressLine {
+pub struct ProgressLine {
     started: Instant,
     terminal: bool,
     /// End the line on a terminal when the last step is shown.
@@ -23,7 +27,7 @@ pub(crate) struct ProgressLine {
 
 impl ProgressLine {
     /// A line whose last step ends it on a terminal.
-    pub(crate) fn new() -> Self {
+    pub fn new() -> Self {
         use std::io::IsTerminal;
         ProgressLine {
             started: Instant::now(),
@@ -34,7 +38,7 @@ impl ProgressLine {
     }
 
     /// A line the caller ends (its total may still grow, as the keypoint fit's does).
-    pub(crate) fn open_ended() -> Self {
+    pub fn open_ended() -> Self {
         ProgressLine {
             newline_at_end: false,
             ..Self::new()
@@ -42,12 +46,12 @@ impl ProgressLine {
     }
 
     /// Seconds since the line was made.
-    pub(crate) fn elapsed(&self) -> f64 {
+    pub fn elapsed(&self) -> f64 {
         self.started.elapsed().as_secs_f64()
     }
 
     /// Shows `label [####------] done/total text`.
-    pub(crate) fn show(&mut self, label: &str, done: usize, total: usize, text: &str) {
+    pub fn show(&mut self, label: &str, done: usize, total: usize, text: &str) {
         let width = 30;
         let filled = (width * done / total.max(1)).min(width);
         let line = format!(
@@ -69,17 +73,9 @@ impl ProgressLine {
 
 /// The texture PCA fit's progress (`bitt_texture::FitProgress`): one [`ProgressLine`] per
 /// stage (generating identities, Gram matrix, eigendecomposition, ...), labelled with it.
-#[derive(Debug)]
-pub(crate) struct PcaFitBar {
+#[derive(Debug, Default)]
+pub struct PcaFitBar {
     current: std::sync::Mutex<Option<(bitt_texture::FitStage, ProgressLine)>>,
-}
-
-impl PcaFitBar {
-    pub(crate) fn new() -> Self {
-        PcaFitBar {
-            current: std::sync::Mutex::new(None),
-        }
-    }
 }
 
 impl bitt_texture::FitProgress for PcaFitBar {
@@ -101,16 +97,9 @@ impl bitt_texture::FitProgress for PcaFitBar {
 }
 
 /// The mesh refinement's progress line.
-pub(crate) struct RefineBar {
+#[derive(Debug, Default)]
+pub struct RefineBar {
     line: ProgressLine,
-}
-
-impl RefineBar {
-    pub(crate) fn new() -> Self {
-        RefineBar {
-            line: ProgressLine::new(),
-        }
-    }
 }
 
 impl RefineObserver for RefineBar {
@@ -126,12 +115,13 @@ impl RefineObserver for RefineBar {
 
 /// The keypoint fit's progress line (its plan grows with each restart, so the caller ends
 /// the line).
-pub(crate) struct FitBar {
+#[derive(Debug)]
+pub struct FitBar {
     line: ProgressLine,
 }
 
-impl FitBar {
-    pub(crate) fn new() -> Self {
+impl Default for FitBar {
+    fn default() -> Self {
         FitBar {
             line: ProgressLine::open_ended(),
         }
@@ -152,7 +142,8 @@ impl FitObserver for FitBar {
 
 /// A run's setup on stderr: its lines, and a bar for each refinement, keypoint fit and
 /// texture PCA fit.
-pub(crate) struct SetupLines;
+#[derive(Debug)]
+pub struct SetupLines;
 
 impl SetupObserver for SetupLines {
     fn say(&mut self, line: &str) {
@@ -160,15 +151,121 @@ impl SetupObserver for SetupLines {
     }
 
     fn refine(&mut self) -> Box<dyn RefineObserver> {
-        Box::new(RefineBar::new())
+        Box::<RefineBar>::default()
     }
 
     fn fit(&mut self) -> Box<dyn FitObserver> {
-        Box::new(FitBar::new())
+        Box::<FitBar>::default()
     }
 
     fn pca(&mut self) -> Box<dyn bitt_texture::FitProgress> {
-        Box::new(PcaFitBar::new())
+        Box::<PcaFitBar>::default()
+    }
+}
+
+/// The training progress line; a caller's flag (Ctrl-C) stops the training.
+#[derive(Debug)]
+pub struct TrainBar {
+    line: ProgressLine,
+    done_before: usize,
+    stop: Arc<AtomicBool>,
+}
+
+impl TrainBar {
+    /// A line for a training that has done `done_before` iterations already; `stop` set
+    /// makes the trainer save and stop.
+    pub fn new(done_before: usize, stop: Arc<AtomicBool>) -> Self {
+        TrainBar {
+            line: ProgressLine::new(),
+            done_before,
+            stop,
+        }
+    }
+}
+
+impl Observer for TrainBar {
+    fn iteration(&mut self, p: &Progress) {
+        let per = self.line.elapsed() / p.iteration.saturating_sub(self.done_before).max(1) as f64;
+        let eta = per * (p.iterations - p.iteration) as f64;
+        self.line.show(
+            "",
+            p.iteration,
+            p.iterations,
+            &format!(
+                "loss {:.4} PSNR {:.2} dB lr {:.1e} {:.2} s/it ETA {:.0} s",
+                p.terms.total, p.psnr, p.learning_rate, per, eta
+            ),
+        );
+    }
+
+    fn recovered(&mut self, iteration: usize, message: &str) {
+        eprintln!("\nwarning: at iteration {iteration}: {message}");
+    }
+
+    fn should_stop(&self) -> bool {
+        self.stop.load(Ordering::SeqCst)
+    }
+}
+
+/// Progress over a whole evaluation: BiTT iterations are the unit of work.
+#[derive(Debug)]
+pub struct EvalBar {
+    line: ProgressLine,
+    done: usize,
+    total: usize,
+    label: String,
+}
+
+impl Default for EvalBar {
+    /// A line whose total the evaluation's plan sets.
+    fn default() -> Self {
+        EvalBar {
+            line: ProgressLine::open_ended(),
+            done: 0,
+            total: 0,
+            label: String::new(),
+        }
+    }
+}
+
+impl Observer for EvalBar {
+    fn iteration(&mut self, p: &Progress) {
+        self.done += 1;
+        let per = self.line.elapsed() / self.done.max(1) as f64;
+        let eta = per * self.total.saturating_sub(self.done) as f64;
+        let label = format!(
+            "{} it {}/{} loss {:.4} | eval ",
+            self.label, p.iteration, p.iterations, p.terms.total
+        );
+        let text = format!("ETA {:.0} min", eta / 60.0);
+        self.line.show(&label, self.done, self.total, &text);
+    }
+    fn recovered(&mut self, iteration: usize, message: &str) {
+        eprintln!("\nrecovered at iteration {iteration}: {message}");
+    }
+}
+
+impl EvalObserver for EvalBar {
+    fn say(&mut self, line: &str) {
+        eprintln!("{line}");
+    }
+
+    fn plan(&mut self, iterations: usize) {
+        self.total = iterations;
+    }
+
+    fn scene(&mut self, label: String) {
+        self.label = label;
+    }
+
+    fn pca(&mut self) -> Box<dyn bitt_texture::FitProgress> {
+        Box::<PcaFitBar>::default()
+    }
+}
+
+impl Default for ProgressLine {
+    fn default() -> Self {
+        Self::new()
     }
 }
 
