@@ -177,6 +177,15 @@ pub fn fresh_run(
         config,
         observer: bar.as_mut(),
     });
+    // What every real-data setup takes besides its input.
+    let real_settings = |config, refine| RealRunSettings {
+        hands,
+        prior,
+        config,
+        cache,
+        refine,
+        device,
+    };
     let real = |setup: crate::real::RealSetup, fit| FreshRun {
         trainer: setup.trainer,
         input: RunInput::Real(Box::new(setup.input), Box::new(setup.scene)),
@@ -224,14 +233,7 @@ pub fn fresh_run(
             for n in &fit.fit.report.notes {
                 observer.say(&format!("note: {n}"));
             }
-            let settings = RealRunSettings {
-                hands,
-                prior,
-                config,
-                cache,
-                refine: refine.take(),
-                device,
-            };
+            let settings = real_settings(config, refine.take());
             let setup = keypoint_setup(&fit, image, path, settings)?;
             let output = FitOutput {
                 record: fit.record(),
@@ -253,14 +255,7 @@ pub fn fresh_run(
                     PriorSource::Procedural => "procedural PCA",
                 },
             ));
-            let settings = RealRunSettings {
-                hands,
-                prior,
-                config,
-                cache,
-                refine: refine.take(),
-                device,
-            };
+            let settings = real_settings(config, refine.take());
             let setup = annotation_setup(image, annotation, settings).context_with(|| {
                 format!(
                     "real data --image {} --annotation {}",
@@ -299,14 +294,7 @@ pub fn fresh_run(
                 scene.novel_views.len(),
                 scene.novel_poses.len()
             ));
-            let settings = RealRunSettings {
-                hands,
-                prior,
-                config,
-                cache,
-                refine: refine.take(),
-                device,
-            };
+            let settings = real_settings(config, refine.take());
             let setup = interhand_setup(&scene, &dataset.paths, settings)?;
             Ok(real(setup, None))
         }

@@ -290,14 +290,13 @@ pub(crate) fn conv2d_forward(x: &[f32], weight: &[f32], bias: &[f32], d: Conv2dD
             );
         }
     };
-    let samples = x
-        .par_chunks_exact(d.c_in * d.plane())
-        .zip(z.par_chunks_exact_mut(d.c_out * pixels));
     if samples_in_parallel(d.batch) {
-        samples.for_each_init(
-            || d.col_buffer(),
-            |col, (xb, zb)| sample(xb, zb, col, false),
-        );
+        x.par_chunks_exact(d.c_in * d.plane())
+            .zip(z.par_chunks_exact_mut(d.c_out * pixels))
+            .for_each_init(
+                || d.col_buffer(),
+                |col, (xb, zb)| sample(xb, zb, col, false),
+            );
     } else {
         let mut col = d.col_buffer();
         for (xb, zb) in x
