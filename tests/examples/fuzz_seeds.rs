@@ -1,6 +1,5 @@
-//! Writes the fuzz targets' seed files into `fuzz/corpus/<target>/` (`bitt_tests::fuzz_seeds`;
-//! the `from_bytes` seeds come from `bitt-pickle`'s ignored test `write_fuzz_seed_corpus`).
-//! `cargo xtask fuzz-seeds` runs it.
+//! Writes every fuzz target's seed files into `fuzz/corpus/<target>/`
+//! (`bitt_tests::fuzz_seeds`). `cargo xtask fuzz-seeds` runs it.
 
 fn main() -> std::io::Result<()> {
     let n = bitt_tests::fuzz_seeds::write_seeds()?;

@@ -11,7 +11,7 @@ use bitt_mesh::mano::to_safetensors;
 use bitt_mesh::model::{NUM_BETAS, NUM_POSE};
 use bitt_mesh::{HandModel, HandParams, HandPose, PinholeCamera, Side, UvLayout};
 
-use crate::pickle_writer::{write_protocol2, write_protocol4};
+use crate::pickle_writer::{PyValue, write_protocol2, write_protocol4};
 use crate::real_fixture::{self, AnnotationOptions};
 
 /// The corpus folder of fuzz target `target`.
@@ -44,10 +44,110 @@ fn points(x0: f64) -> Vec<String> {
         .collect()
 }
 
+/// A small value with every kind the pickle writer emits (scalars, strings, containers,
+/// numpy arrays in both orders, a numpy scalar, a scipy CSC matrix, chumpy objects): the
+/// generic reader's seeds, one per protocol.
+fn every_kind() -> PyValue {
+    let ch = PyValue::ChumpyCh(Box::new(PyValue::f64_array(
+        &[2, 2],
+        vec![1.0, 2.0, 3.0, 4.0],
+    )));
+    PyValue::dict(vec![
+        ("none", PyValue::None),
+        (
+            "flags",
+            PyValue::List(vec![PyValue::Bool(true), PyValue::Bool(false)]),
+        ),
+        (
+            "numbers",
+            PyValue::Tuple(vec![PyValue::Int(-7), PyValue::Float(0.25)]),
+        ),
+        ("set", PyValue::Set(vec![PyValue::Int(1), PyValue::Int(2)])),
+        ("text", PyValue::Unicode("hand".into())),
+        ("bytes", PyValue::Bytes(vec![0, 1, 255])),
+        (
+            "f64",
+            PyValue::f64_array(&[2, 3], vec![0.5, -1.0, 2.0, 3.0, 4.0, 5.0]),
+        ),
+        (
+            "fortran",
+            PyValue::NdArrayI64 {
+                shape: vec![2, 2],
+                data: vec![1, 3, 2, 4],
+                fortran: true,
+            },
+        ),
+        (
+            "u32",
+            PyValue::NdArrayU32 {
+                shape: vec![1, 3],
+                data: vec![0, 1, 2],
+            },
+        ),
+        (
+            "f32",
+            PyValue::NdArrayF32 {
+                shape: vec![2],
+                data: vec![1.5, -2.5],
+            },
+        ),
+        (
+            "u8",
+            PyValue::NdArrayU8 {
+                shape: vec![3],
+                data: vec![7, 8, 9],
+            },
+        ),
+        (
+            "mask",
+            PyValue::NdArrayBool {
+                shape: vec![2],
+                data: vec![true, false],
+            },
+        ),
+        ("scalar", PyValue::NpScalarF64(6.5)),
+        (
+            "sparse",
+            PyValue::Csc {
+                shape: (3, 2),
+                data: vec![1.0, 2.0],
+                indices: vec![0, 2],
+                indptr: vec![0, 1, 2],
+            },
+        ),
+        ("ch", ch.clone()),
+        (
+            "select",
+            PyValue::ChumpySelect {
+                a: Box::new(ch),
+                idxs: vec![3, 0],
+                preferred_shape: vec![2],
+            },
+        ),
+    ])
+}
+
 /// The seeds of every target: small valid inputs built here (never copied from licensed
 /// data).
 pub fn seeds() -> Vec<(&'static str, String, Vec<u8>)> {
     let mut out = Vec::new();
+    // The generic pickle reader: every kind of value in protocols 2 and 4, and an annotation.
+    let value = every_kind();
+    out.push((
+        "from_bytes",
+        "seed_kinds_p2.pkl".into(),
+        write_protocol2(&value),
+    ));
+    out.push((
+        "from_bytes",
+        "seed_kinds_p4.pkl".into(),
+        write_protocol4(&value),
+    ));
+    out.push((
+        "from_bytes",
+        "seed_annotation_p4.pkl".into(),
+        write_protocol4(&real_fixture::annotation(AnnotationOptions::default())),
+    ));
     // Torch: the project's own checkpoints (`crates/bitt-pickle/tests-data`).
     let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../crates/bitt-pickle/tests-data");
     for name in ["torch_zip.pth", "torch_legacy.pth"] {
@@ -71,10 +171,7 @@ pub fn seeds() -> Vec<(&'static str, String, Vec<u8>)> {
         "seed_demo_p4.pkl".into(),
         write_protocol4(&ann),
     ));
-    let one = real_fixture::annotation(AnnotationOptions {
-        no_left: true,
-        ..Default::default()
-    });
+    let one = real_fixture::annotation(AnnotationOptions::RIGHT_ONLY);
     out.push((
         "annotation",
         "seed_right_only_p2.pkl".into(),

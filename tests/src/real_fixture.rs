@@ -8,15 +8,51 @@ use glam::DMat3;
 
 use crate::pickle_writer::{PyValue, write_protocol4};
 
-fn s(k: &str) -> PyValue {
+/// A Python `str`.
+pub fn s(k: &str) -> PyValue {
     PyValue::Unicode(k.into())
 }
 
-fn f32s(shape: &[usize], data: Vec<f32>) -> PyValue {
+/// A float32 numpy array.
+pub fn f32s(shape: &[usize], data: Vec<f32>) -> PyValue {
     PyValue::NdArrayF32 {
         shape: shape.to_vec(),
         data,
     }
+}
+
+/// An annotation's `camera` entry: identity rotation, translation `(0, 0, depth)` and a `K`
+/// with focal length `focal` about the 256 x 256 crop's centre.
+pub fn camera_entry(focal: f64, depth: f32) -> PyValue {
+    PyValue::Dict(vec![
+        (s("R"), f32s(&[3, 3], rows(DMat3::IDENTITY))),
+        (s("t"), f32s(&[3], vec![0.0, 0.0, depth])),
+        (
+            s("camera"),
+            PyValue::NdArrayF64 {
+                shape: vec![3, 3],
+                data: vec![focal, 0.0, 128.0, 0.0, focal, 128.0, 0.0, 0.0, 1.0],
+                fortran: false,
+            },
+        ),
+    ])
+}
+
+/// An annotation's `image` entry: InterHand2.6M frame `frame` of capture 0 seen by
+/// `camera` (a 334 x 512 frame), with image id `id`.
+pub fn image_entry(id: i64, camera: &str, frame: i64) -> PyValue {
+    PyValue::Dict(vec![
+        (s("id"), PyValue::Int(id)),
+        (
+            s("file_name"),
+            s(&format!("Capture0/seq/cam{camera}/image{frame:04}.jpg")),
+        ),
+        (s("width"), PyValue::Int(334)),
+        (s("height"), PyValue::Int(512)),
+        (s("capture"), PyValue::Int(0)),
+        (s("camera"), s(camera)),
+        (s("frame_idx"), PyValue::Int(frame)),
+    ])
 }
 
 /// Row-major entries of a rotation matrix as `f32`.
@@ -37,6 +73,23 @@ pub struct AnnotationOptions {
     /// Added to the left hand's translation (metres, camera frame): hands off the image,
     /// far away or behind the camera.
     pub left_offset: [f32; 3],
+}
+
+impl AnnotationOptions {
+    /// A NaN in the right hand's translation, nothing else changed.
+    pub const NAN: Self = Self {
+        turn: 0.0,
+        nan: true,
+        no_left: false,
+        left_offset: [0.0; 3],
+    };
+    /// The right hand only (no left hand), nothing else changed.
+    pub const RIGHT_ONLY: Self = Self {
+        turn: 0.0,
+        nan: false,
+        no_left: true,
+        left_offset: [0.0; 3],
+    };
 }
 
 /// A BiTT annotation (the demo `NN.pkl` layout; see `shared/data/interhand_demo/README.md`)
@@ -75,27 +128,8 @@ pub fn annotation(opts: AnnotationOptions) -> PyValue {
             (s("trans"), f32s(&[1, 3], trans)),
         ])
     };
-    let camera = PyValue::Dict(vec![
-        (s("R"), f32s(&[3, 3], rows(DMat3::IDENTITY))),
-        (s("t"), f32s(&[3], vec![0.0, 0.0, 0.65])),
-        (
-            s("camera"),
-            PyValue::NdArrayF64 {
-                shape: vec![3, 3],
-                data: vec![300.0, 0.0, 128.0, 0.0, 300.0, 128.0, 0.0, 0.0, 1.0],
-                fortran: false,
-            },
-        ),
-    ]);
-    let image = PyValue::Dict(vec![
-        (s("id"), PyValue::Int(101)),
-        (s("file_name"), s("Capture0/seq/cam400262/image0101.jpg")),
-        (s("width"), PyValue::Int(334)),
-        (s("height"), PyValue::Int(512)),
-        (s("capture"), PyValue::Int(0)),
-        (s("camera"), s("400262")),
-        (s("frame_idx"), PyValue::Int(101)),
-    ]);
+    let camera = camera_entry(300.0, 0.65);
+    let image = image_entry(101, "400262", 101);
     let ann = PyValue::Dict(vec![
         (s("bbox"), PyValue::List(vec![PyValue::Float(40.0); 4])),
         (s("hand_type"), s("interacting")),

@@ -9,18 +9,8 @@ use bitt_mesh::export::{ExportHand, glb_bytes};
 use bitt_mesh::lbs::HandPose;
 use bitt_mesh::{Side, load_bitt_annotation, procedural_pair};
 use bitt_tests::pickle_writer::{PyValue, write_protocol4};
+use bitt_tests::real_fixture::{camera_entry, f32s, image_entry, s};
 use glam::{DMat3, DVec3};
-
-fn s(k: &str) -> PyValue {
-    PyValue::Unicode(k.into())
-}
-
-fn f32s(shape: &[usize], data: Vec<f32>) -> PyValue {
-    PyValue::NdArrayF32 {
-        shape: shape.to_vec(),
-        data,
-    }
-}
 
 /// Root rotation of each hand, row-major.
 fn root(side: Side) -> [f32; 9] {
@@ -47,30 +37,8 @@ fn hand(side: Side, pose: Vec<f32>) -> PyValue {
 
 /// An annotation with the demo files' layout (see the shared demo README).
 fn annotation(right_pose: Vec<f32>) -> PyValue {
-    let camera = PyValue::Dict(vec![
-        (
-            s("R"),
-            f32s(&[3, 3], vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]),
-        ),
-        (s("t"), f32s(&[3], vec![0.0, 0.0, 0.6])),
-        (
-            s("camera"),
-            PyValue::NdArrayF64 {
-                shape: vec![3, 3],
-                data: vec![600.0, 0.0, 128.0, 0.0, 600.0, 128.0, 0.0, 0.0, 1.0],
-                fortran: false,
-            },
-        ),
-    ]);
-    let image = PyValue::Dict(vec![
-        (s("id"), PyValue::Int(6659)),
-        (s("file_name"), s("Capture0/seq/cam400028/image48873.jpg")),
-        (s("width"), PyValue::Int(334)),
-        (s("height"), PyValue::Int(512)),
-        (s("capture"), PyValue::Int(0)),
-        (s("camera"), s("400028")),
-        (s("frame_idx"), PyValue::Int(48873)),
-    ]);
+    let camera = camera_entry(600.0, 0.6);
+    let image = image_entry(6659, "400028", 48873);
     let ann = PyValue::Dict(vec![
         (
             s("bbox"),

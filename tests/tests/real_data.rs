@@ -365,24 +365,12 @@ fn bad_annotation_inputs_are_named() {
     );
     // NaN in the annotation.
     let nan = dir.join("nan.pkl");
-    write_annotation(
-        &nan,
-        AnnotationOptions {
-            nan: true,
-            ..AnnotationOptions::default()
-        },
-    );
+    write_annotation(&nan, AnnotationOptions::NAN);
     let e = err(setup(&img, &nan));
     assert!(e.contains("nan.pkl") && e.contains("NaN"), "{e}");
     // One hand only.
     let single = dir.join("single.pkl");
-    write_annotation(
-        &single,
-        AnnotationOptions {
-            no_left: true,
-            ..AnnotationOptions::default()
-        },
-    );
+    write_annotation(&single, AnnotationOptions::RIGHT_ONLY);
     let e = err(setup(&img, &single));
     assert!(e.contains("single.pkl") && e.contains("left"), "{e}");
     // Missing files.
@@ -411,8 +399,8 @@ fn demo_frame_trains_with_procedural_hands_if_present() {
     let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/interhand_demo");
     if !demo.join("01.pkl").is_file() || !demo.join("01.jpg").is_file() {
         eprintln!(
-            "skipped: the InterHand demo frames are not at {} (they are not part of the \
-             project)",
+            "SKIPPED demo_frame_trains_with_procedural_hands_if_present: the InterHand demo \
+             frames are not at {} (they are not part of the project)",
             demo.display()
         );
         return;

@@ -2,7 +2,7 @@
 
 use std::sync::OnceLock;
 
-use bitt::gpu_check::{AdapterInfo, AdapterKind};
+use bitt::gpu_check::AdapterInfo;
 use burn::tensor::{Device, DeviceKind};
 
 /// The backends this binary is built with.
@@ -62,35 +62,12 @@ pub fn wgpu_with_adapter() -> anyhow::Result<(Device, AdapterInfo)> {
                 .init_with_setup()
                 .map_err(|e| format!("no wgpu adapter: {e} (Vulkan: {vulkan})"))?,
         };
-        let info = setup.adapter.get_info();
-        eprintln!(
-            "wgpu adapter: {} ({:?}, {:?}, driver {} {})",
-            info.name, setup.backend, info.device_type, info.driver, info.driver_info
-        );
-        Ok((
-            device,
-            AdapterInfo {
-                name: info.name.clone(),
-                kind: adapter_kind(info.device_type),
-                backend: format!("{:?}", setup.backend),
-                driver: info.driver.clone(),
-                driver_info: info.driver_info.clone(),
-            },
-        ))
+        let info = AdapterInfo::from_wgpu(&setup.adapter.get_info(), setup.backend);
+        eprintln!("wgpu adapter: {}", info.describe());
+        Ok((device, info))
     })
     .clone()
     .map_err(|e| anyhow::anyhow!(e))
-}
-
-fn adapter_kind(t: burn::tensor::wgpu::wgpu::DeviceType) -> AdapterKind {
-    use burn::tensor::wgpu::wgpu::DeviceType;
-    match t {
-        DeviceType::DiscreteGpu => AdapterKind::DiscreteGpu,
-        DeviceType::IntegratedGpu => AdapterKind::IntegratedGpu,
-        DeviceType::VirtualGpu => AdapterKind::VirtualGpu,
-        DeviceType::Cpu => AdapterKind::Cpu,
-        DeviceType::Other => AdapterKind::Other,
-    }
 }
 
 #[cfg(feature = "cuda")]

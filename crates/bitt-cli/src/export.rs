@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use bitt::avatar_export::{ExportKind, export_run};
+use bitt::avatar_export::ExportKind;
 use bitt::saved::SavedRun;
 
 use crate::avatar_pose::OtherPoseArgs;
@@ -61,7 +61,8 @@ pub fn run(args: &ExportArgs) -> Result<()> {
     args.other_pose.check()?;
     let saved = SavedRun::load(&args.run)?;
     let hands = args.other_pose.hands(&saved)?;
-    export_run(&saved, hands.as_ref(), kind, &args.out)
+    saved
+        .export(hands.as_ref(), kind, &args.out)
         .with_context(|| format!("--out {}", args.out.display()))?;
     let clip = if hands.is_none() {
         saved.num_novel_poses()

@@ -157,13 +157,7 @@ mod tests {
         let (img, pkl, nan) = (dir.join("01.png"), dir.join("01.pkl"), dir.join("nan.pkl"));
         write_image(&img, 256, 256, None);
         write_annotation(&pkl, AnnotationOptions::default());
-        write_annotation(
-            &nan,
-            AnnotationOptions {
-                nan: true,
-                ..AnnotationOptions::default()
-            },
-        );
+        write_annotation(&nan, AnnotationOptions::NAN);
         let cache = dir.join("cache");
         let out = dir.join("out");
         let common = |annotation: &Path, out: &Path| {

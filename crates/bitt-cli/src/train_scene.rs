@@ -668,13 +668,7 @@ mod tests {
         write_image(&img, 128, 128, None);
         write_annotation(&pkl, AnnotationOptions::default());
         let nan = dir.join("nan.pkl");
-        write_annotation(
-            &nan,
-            AnnotationOptions {
-                nan: true,
-                ..AnnotationOptions::default()
-            },
-        );
+        write_annotation(&nan, AnnotationOptions::NAN);
         let (out, cache) = (dir.join("run"), dir.join("cache"));
         let attempt = |image: &Path, annotation: &Path, extra: &[&str]| {
             let mut all = vec![

@@ -194,20 +194,8 @@ fn bad_annotations_are_refused_naming_the_file() {
         b"\x80\x02cposix\nsystem\nq\x00(U\x02lsq\x01tR.",
     )
     .unwrap();
-    write_annotation(
-        &case.path("nan.pkl"),
-        AnnotationOptions {
-            nan: true,
-            ..AnnotationOptions::default()
-        },
-    );
-    write_annotation(
-        &case.path("one.pkl"),
-        AnnotationOptions {
-            no_left: true,
-            ..AnnotationOptions::default()
-        },
-    );
+    write_annotation(&case.path("nan.pkl"), AnnotationOptions::NAN);
+    write_annotation(&case.path("one.pkl"), AnnotationOptions::RIGHT_ONLY);
     let out = case.s("run");
     for (file, problem) in [
         ("noise.pkl", "noise.pkl"),

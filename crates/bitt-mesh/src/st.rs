@@ -46,8 +46,40 @@ pub fn serialize(
             .map_err(|e| FileError::format(path, format!("cannot encode `{name}`: {e}")))?;
         views.push((name.clone(), view));
     }
-    safetensors::serialize(views, Some(metadata))
-        .map_err(|e| FileError::format(path, format!("cannot encode: {e}")))
+    let bytes = safetensors::serialize(views, Some(metadata))
+        .map_err(|e| FileError::format(path, format!("cannot encode: {e}")))?;
+    Ok(sorted_header(bytes))
+}
+
+/// The same file with its JSON header's keys in sorted order. `safetensors` writes the
+/// metadata from a `HashMap`, whose order changes from one map to the next, so the same
+/// content would give different bytes; sorted, equal content gives equal files. The
+/// header keeps its length (the same keys and values, reordered), so the tensor data and
+/// their offsets are untouched.
+fn sorted_header(mut bytes: Vec<u8>) -> Vec<u8> {
+    let Some(len) = bytes
+        .get(..8)
+        .and_then(|b| <[u8; 8]>::try_from(b).ok())
+        .and_then(|b| usize::try_from(u64::from_le_bytes(b)).ok())
+    else {
+        return bytes;
+    };
+    let Some(header) = bytes.get(8..8 + len) else {
+        return bytes;
+    };
+    // serde_json's `Map` is a `BTreeMap` here (no `preserve_order`): keys come out sorted.
+    let Ok(value) = serde_json::from_slice::<serde_json::Value>(header) else {
+        return bytes;
+    };
+    let Ok(mut sorted) = serde_json::to_vec(&value) else {
+        return bytes;
+    };
+    if sorted.len() > len {
+        return bytes;
+    }
+    sorted.resize(len, b' ');
+    bytes[8..8 + len].copy_from_slice(&sorted);
+    bytes
 }
 
 /// Serializes `tensors` with `metadata` and writes them to `path` atomically
@@ -255,4 +287,39 @@ fn from_le<T: Element>(bytes: &[u8]) -> Vec<T> {
         .chunks_exact(std::mem::size_of::<T>())
         .map(T::from_le)
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Equal content gives equal bytes, whatever order the metadata map iterates in, and the
+    /// file still reads with its tensors and metadata.
+    #[test]
+    fn equal_content_gives_equal_files() {
+        let path = Path::new("x.safetensors");
+        let entries: Vec<Entry> = vec![
+            ("b".into(), Dtype::F32, vec![2], f32_bytes(&[1.0, 2.0])),
+            ("a".into(), Dtype::U32, vec![1], u32_bytes([7])),
+        ];
+        let meta = || -> HashMap<String, String> {
+            (0..8)
+                .map(|i| (format!("key{i}"), format!("value{i}")))
+                .collect()
+        };
+        let first = serialize(path, &entries, meta()).unwrap();
+        for _ in 0..20 {
+            assert_eq!(serialize(path, &entries, meta()).unwrap(), first);
+        }
+        let r = Reader::open(&first, path).unwrap();
+        assert_eq!(r.metadata(), &meta());
+        assert_eq!(
+            r.values::<f32>("b", &[Some(2)]).unwrap(),
+            (vec![2], vec![1.0, 2.0])
+        );
+        assert_eq!(
+            r.values::<u32>("a", &[Some(1)]).unwrap(),
+            (vec![1], vec![7])
+        );
+    }
 }

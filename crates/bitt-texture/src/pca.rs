@@ -13,7 +13,7 @@ use std::path::Path;
 use std::sync::Mutex;
 
 use bitt_mesh::glam::DVec2;
-use bitt_mesh::{FileErrorExt, UvLayout};
+use bitt_mesh::UvLayout;
 use burn::tensor::{Device, Tensor, TensorData};
 use rayon::prelude::*;
 use safetensors::Dtype;
@@ -582,15 +582,7 @@ impl TexturePca {
     /// faces when present, the size and scale as metadata) to safetensors bytes.
     pub fn to_safetensors(&self, path_for_errors: &Path) -> Result<Vec<u8>, TextureError> {
         let (entries, meta) = self.entries();
-        let mut views = Vec::with_capacity(entries.len());
-        for (name, dtype, shape, bytes) in &entries {
-            let view = safetensors::tensor::TensorView::new(*dtype, shape.clone(), bytes).map_err(
-                |e| TextureError::format(path_for_errors, format!("cannot encode `{name}`: {e}")),
-            )?;
-            views.push((name.clone(), view));
-        }
-        safetensors::serialize(views, Some(meta))
-            .map_err(|e| TextureError::format(path_for_errors, format!("cannot encode: {e}")))
+        Ok(st::serialize(path_for_errors, &entries, meta)?)
     }
 
     fn entries(&self) -> (Vec<st::Entry>, HashMap<String, String>) {

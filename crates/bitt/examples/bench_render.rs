@@ -136,6 +136,22 @@ fn backward<const D: usize>(loss: Tensor<1>, wrt: &Tensor<D>) -> Result<()> {
     Ok(())
 }
 
+/// Backward of `loss` and read-backs of the gradients of two inputs.
+fn backward_pair<const A: usize, const B: usize>(
+    (loss, a, b): (Tensor<1>, Tensor<A>, Tensor<B>),
+) -> Result<()> {
+    let grads = loss.backward();
+    sync(
+        a.grad(&grads)
+            .context("the first input received no gradient")?,
+    )?;
+    sync(
+        b.grad(&grads)
+            .context("the second input received no gradient")?,
+    )?;
+    Ok(())
+}
+
 fn tensor<const D: usize>(values: Vec<f32>, shape: [usize; D], device: &Device) -> Tensor<D> {
     Tensor::from_data(TensorData::new(values, shape), device)
 }
@@ -301,12 +317,7 @@ fn main() -> Result<()> {
                 sync(loss.clone())?;
                 Ok((loss, t, u))
             },
-            |(loss, t, u)| {
-                let grads = loss.backward();
-                sync(t.grad(&grads).context("no texture gradient")?)?;
-                sync(u.grad(&grads).context("no uv gradient")?)?;
-                Ok(())
-            },
+            backward_pair,
         )?,
     });
 
@@ -356,12 +367,7 @@ fn main() -> Result<()> {
                 sync(loss.clone())?;
                 Ok((loss, tx, lt))
             },
-            |(loss, tx, lt)| {
-                let grads = loss.backward();
-                sync(tx.grad(&grads).context("no texel gradient")?)?;
-                sync(lt.grad(&grads).context("no light gradient")?)?;
-                Ok(())
-            },
+            backward_pair,
         )?,
     });
 
@@ -392,12 +398,7 @@ fn main() -> Result<()> {
                 sync(loss.clone())?;
                 Ok((loss, im, c))
             },
-            |(loss, im, c)| {
-                let grads = loss.backward();
-                sync(im.grad(&grads).context("no image gradient")?)?;
-                sync(c.grad(&grads).context("no clip gradient")?)?;
-                Ok(())
-            },
+            backward_pair,
         )?,
     });
 

@@ -189,7 +189,7 @@ impl AvatarFiles<'_> {
     }
 }
 
-/// What [`export_run`] writes.
+/// What [`SavedRun::export`](crate::saved::SavedRun::export) writes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ExportKind {
     /// The rigged glTF binary (the run's `avatar.glb`).
@@ -201,7 +201,7 @@ pub enum ExportKind {
 }
 
 impl ExportKind {
-    /// What [`export_run`] wrote, for the user: `clip_poses` novel poses in the rigged clip
+    /// What [`SavedRun::export`](crate::saved::SavedRun::export) wrote, for the user: `clip_poses` novel poses in the rigged clip
     /// (0 for another pose, which has no clip).
     pub fn written(self, clip_poses: usize) -> String {
         match self {
@@ -213,47 +213,6 @@ impl ExportKind {
             ExportKind::Obj => "posed meshes (OBJ, MTL and textures)".to_string(),
         }
     }
-}
-
-/// Writes the avatar of a trained run to `out` again, without retraining: standing in the
-/// training pose with the clip of the scene's novel poses (`hands` `None`), or in `hands`
-/// (another annotation's or a generated pose; no clip, since its world is another one).
-///
-/// # Errors
-/// A run whose textures do not fit its layout, hands that cannot be posed, or an unwritable
-/// `out` (nothing is left half-written).
-pub fn export_run(
-    saved: &crate::saved::SavedRun,
-    hands: Option<&TwoHandScene>,
-    kind: ExportKind,
-    out: &Path,
-) -> Result<(), BittError> {
-    let assets = saved.assets()?;
-    let layout = &assets.layouts[0];
-    let s = assets.texture_size;
-    let mut images = Vec::new();
-    for fine in saved.fine() {
-        let values = crate::outputs::texture_image(layout, fine)?;
-        images.push(crate::outputs::rgb_image(&values, s, s)?);
-    }
-    let training = saved.training();
-    let clip = match hands {
-        None => saved.novel_poses()?,
-        Some(_) => Vec::new(),
-    };
-    let files = AvatarFiles {
-        models: &assets.models,
-        hands: hands.unwrap_or(&training),
-        textures: [&images[0], &images[1]],
-        material: Material::default(),
-        clip,
-    };
-    match kind {
-        ExportKind::Rigged => write_atomically(out, &files.rigged_glb()?)?,
-        ExportKind::Static => write_atomically(out, &files.static_glb()?)?,
-        ExportKind::Obj => files.write_obj(out)?,
-    }
-    Ok(())
 }
 
 #[cfg(test)]

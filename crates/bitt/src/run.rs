@@ -668,7 +668,10 @@ fn write_report(
     // The interactive 3D view of the avatar and light `write_run` wrote next to this report.
     let dir = path.parent().unwrap_or(Path::new("."));
     html.push_str("<h2>3D avatar</h2>");
-    html.push_str(&crate::viewer::run_viewer_html(dir)?);
+    html.push_str(&crate::viewer::run_viewer_html(
+        &dir.join(files::AVATAR),
+        &dir.join(files::LIGHT),
+    )?);
     if let Some(s) = &summary.synthetic {
         html.push_str("<h2>Against ground truth</h2><table><tr><th>evaluation</th><th>method</th><th>L1</th><th>PSNR</th><th>SSIM</th><th>MS-SSIM</th></tr>");
         let mut row = |name: &str, fine: &ImageMetrics, coarse: &ImageMetrics| {

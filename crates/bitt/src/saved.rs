@@ -5,12 +5,14 @@
 
 use std::path::Path;
 
+use bitt_mesh::export::write_atomically;
 use bitt_mesh::{HandPair, PinholeCamera, Side, TwoHandScene, procedural_pair};
-use bitt_render::scene::LightValues;
+use bitt_render::scene::{LightValues, Material};
 use burn::tensor::Device;
 
 use crate::BittError;
 use crate::assets::HandAssets;
+use crate::avatar_export::{AvatarFiles, ExportKind};
 use crate::evaluate::move_light;
 use crate::real::{RealAvatar, RealInput, render_textures};
 use crate::run::SavedAvatar;
@@ -270,5 +272,46 @@ impl SavedRun {
             SavedRun::Synthetic(a) => a.render(hands, Some(light), device),
             SavedRun::Real(a, assets) => render_textures(assets, &a.fine, hands, light, device),
         }
+    }
+
+    /// Writes the avatar of a trained run to `out` again, without retraining: standing in the
+    /// training pose with the clip of the scene's novel poses (`hands` `None`), or in `hands`
+    /// (another annotation's or a generated pose; no clip, since its world is another one).
+    ///
+    /// # Errors
+    /// A run whose textures do not fit its layout, hands that cannot be posed, or an unwritable
+    /// `out` (nothing is left half-written).
+    pub fn export(
+        &self,
+        hands: Option<&TwoHandScene>,
+        kind: ExportKind,
+        out: &Path,
+    ) -> Result<(), BittError> {
+        let assets = self.assets()?;
+        let layout = &assets.layouts[0];
+        let s = assets.texture_size;
+        let mut images = Vec::new();
+        for fine in self.fine() {
+            let values = crate::outputs::texture_image(layout, fine)?;
+            images.push(crate::outputs::rgb_image(&values, s, s)?);
+        }
+        let training = self.training();
+        let clip = match hands {
+            None => self.novel_poses()?,
+            Some(_) => Vec::new(),
+        };
+        let files = AvatarFiles {
+            models: &assets.models,
+            hands: hands.unwrap_or(&training),
+            textures: [&images[0], &images[1]],
+            material: Material::default(),
+            clip,
+        };
+        match kind {
+            ExportKind::Rigged => write_atomically(out, &files.rigged_glb()?)?,
+            ExportKind::Static => write_atomically(out, &files.static_glb()?)?,
+            ExportKind::Obj => files.write_obj(out)?,
+        }
+        Ok(())
     }
 }

@@ -35,7 +35,6 @@ use bitt_render::scene::LightValues;
 
 use crate::BittError;
 use crate::outputs::base64;
-use crate::run::files;
 
 /// The vendored three.js release (`crates/bitt/assets/vendor/three/README.md`).
 pub const THREE_VERSION: &str = "0.187.0";
@@ -209,23 +208,20 @@ pub fn viewer_html(glb: &[u8], light: &LightValues) -> String {
     html
 }
 
-/// The viewer of a run folder: [`viewer_html`] for its `avatar.glb` and `light.json`. The
-/// light is read leniently (a non-finite value, written as `null`, becomes 0) so that a
-/// report is still written for a run whose light estimate broke down.
+/// The viewer of a run's avatar: [`viewer_html`] for the GLB at `glb_path` and the light
+/// JSON at `light_path` (a run folder's `avatar.glb` and `light.json`). The light is read
+/// leniently (a non-finite value, written as `null`, becomes 0) so that a report is still
+/// written for a run whose light estimate broke down.
 ///
 /// # Errors
 /// [`BittError`] when either file cannot be read or the light is not a JSON object.
-pub fn run_viewer_html(dir: &Path) -> Result<String, BittError> {
-    let read = |name: &str| {
-        let path = dir.join(name);
-        std::fs::read(&path).map_err(|e| BittError::io(&path, e))
-    };
-    let glb = read(files::AVATAR)?;
-    let light_path = dir.join(files::LIGHT);
-    let value: serde_json::Value = serde_json::from_slice(&read(files::LIGHT)?)
-        .map_err(|e| BittError::corrupt(&light_path, format!("not JSON: {e}")))?;
+pub fn run_viewer_html(glb_path: &Path, light_path: &Path) -> Result<String, BittError> {
+    let read = |path: &Path| std::fs::read(path).map_err(|e| BittError::io(path, e));
+    let glb = read(glb_path)?;
+    let value: serde_json::Value = serde_json::from_slice(&read(light_path)?)
+        .map_err(|e| BittError::corrupt(light_path, format!("not JSON: {e}")))?;
     if !value.is_object() {
-        return Err(BittError::corrupt(&light_path, "not a light"));
+        return Err(BittError::corrupt(light_path, "not a light"));
     }
     let rgb = |key: &str| -> [f32; 3] {
         std::array::from_fn(|i| value[key][i].as_f64().map_or(f32::NAN, |x| x as f32))
@@ -516,25 +512,26 @@ mod tests {
     }
 
     #[test]
-    fn run_viewer_reads_the_run_folder() {
+    fn run_viewer_reads_the_avatar_and_light_files() {
         let dir = std::env::temp_dir().join(format!("bitt-viewer-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        assert!(run_viewer_html(&dir).is_err(), "no avatar.glb");
-        std::fs::write(dir.join(files::AVATAR), b"glTF-bytes").unwrap();
+        let (glb, light) = (dir.join("avatar.glb"), dir.join("light.json"));
+        assert!(run_viewer_html(&glb, &light).is_err(), "no avatar.glb");
+        std::fs::write(&glb, b"glTF-bytes").unwrap();
         std::fs::write(
-            dir.join(files::LIGHT),
+            &light,
             r#"{"ambient": [0.5, 0.5, 0.5], "diffuse": [null, 0.25, 0.25],
                 "specular": [0, 0, 0], "location": [0, 0, 0.5], "frame": "camera"}"#,
         )
         .unwrap();
-        let html = run_viewer_html(&dir).unwrap();
+        let html = run_viewer_html(&glb, &light).unwrap();
         assert!(html.contains(&base64(b"glTF-bytes")));
         let l: serde_json::Value =
             serde_json::from_str(between(&html, "id=\"bitt-light\">", "</script>")).unwrap();
         assert_eq!(l["diffuse"], serde_json::json!([0.0, 0.25, 0.25]));
         assert_eq!(l["location"][2], 0.5);
-        std::fs::write(dir.join(files::LIGHT), "[1, 2]").unwrap();
-        assert!(run_viewer_html(&dir).is_err(), "not a light");
+        std::fs::write(&light, "[1, 2]").unwrap();
+        assert!(run_viewer_html(&glb, &light).is_err(), "not a light");
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -739,8 +739,8 @@ fn deterministic_and_robust_to_odd_configs() {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Debug renders: `cargo test -p bitt-mesh render_debug_images -- --ignored` writes PNGs
-// of the hand (back faces in red) and of the UV layout to the system temp directory.
+// Renders of the hand with back faces in red, and of its UV layout: checked for visible back
+// faces; with `BITT_DEBUG_IMAGES=DIR` they are also written there as PNGs to look at.
 
 fn rasterize(verts: &[DVec3], faces: &[[u32; 3]], axes: [DVec3; 3], size: u32) -> image::RgbImage {
     let project = |p: DVec3| DVec3::new(p.dot(axes[0]), p.dot(axes[1]), p.dot(axes[2]));
@@ -822,10 +822,22 @@ fn render_uv(m: &HandModel, size: u32) -> image::RgbImage {
     img
 }
 
+/// Pixels of `img` showing a back face (pure red shades), and pixels showing the hand.
+fn back_face_pixels(img: &image::RgbImage) -> (usize, usize) {
+    let hand = img.pixels().filter(|p| p.0 != [255, 255, 255]).count();
+    let back = img
+        .pixels()
+        .filter(|p| p.0[0] > 0 && p.0[1] == 0 && p.0[2] == 0)
+        .count();
+    (back, hand)
+}
+
+/// Seen from outside, a closed, outward-oriented surface shows only front faces: in the rest
+/// pose, the model's mean pose and a fist, from four sides, no pixel shows a back face. `BITT_DEBUG_IMAGES=DIR` writes the renders and the UV
+/// layout into DIR.
 #[test]
-#[ignore = "writes debug images"]
-fn render_debug_images() {
-    let dir = std::env::temp_dir();
+fn renders_show_no_back_faces() {
+    let out = std::env::var_os("BITT_DEBUG_IMAGES").map(std::path::PathBuf::from);
     let m = right();
     let views = [
         ("back", [DVec3::NEG_Z, DVec3::NEG_X, DVec3::Y]),
@@ -835,16 +847,31 @@ fn render_debug_images() {
     ];
     let fist = forward(&m, &[0.0; NUM_BETAS], DVec3::ZERO, &fist_pose());
     let relaxed = forward(&m, &[0.0; NUM_BETAS], DVec3::ZERO, &m.pose_pca_mean);
-    for (name, axes) in views {
-        rasterize(&m.v_template, &m.faces, axes, 600)
-            .save(dir.join(format!("hand_{name}.png")))
-            .unwrap();
-        rasterize(&fist.verts, &m.faces, axes, 600)
-            .save(dir.join(format!("hand_fist_{name}.png")))
-            .unwrap();
-        rasterize(&relaxed.verts, &m.faces, axes, 600)
-            .save(dir.join(format!("hand_mean_{name}.png")))
-            .unwrap();
+    let poses = [
+        ("rest", &m.v_template),
+        ("fist", &fist.verts),
+        ("mean", &relaxed.verts),
+    ];
+    for (view, axes) in views {
+        for (pose, verts) in poses {
+            let img = rasterize(verts, &m.faces, axes, 300);
+            let (back, hand) = back_face_pixels(&img);
+            eprintln!("{pose} {view}: {back} back-face pixels of {hand}");
+            assert!(
+                hand > 300 * 300 / 20,
+                "{pose} {view}: only {hand} hand pixels"
+            );
+            assert_eq!(
+                back, 0,
+                "{pose} {view}: {back} of {hand} pixels show a back face"
+            );
+            if let Some(dir) = &out {
+                img.save(dir.join(format!("hand_{pose}_{view}.png")))
+                    .unwrap();
+            }
+        }
     }
-    render_uv(&m, 1024).save(dir.join("hand_uv.png")).unwrap();
+    if let Some(dir) = &out {
+        render_uv(&m, 1024).save(dir.join("hand_uv.png")).unwrap();
+    }
 }

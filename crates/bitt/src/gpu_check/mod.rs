@@ -74,6 +74,27 @@ pub struct AdapterInfo {
 }
 
 impl AdapterInfo {
+    /// What wgpu says of an adapter, and the graphics API it was opened with.
+    pub fn from_wgpu(
+        info: &burn::tensor::wgpu::wgpu::AdapterInfo,
+        backend: impl std::fmt::Debug,
+    ) -> Self {
+        use burn::tensor::wgpu::wgpu::DeviceType;
+        Self {
+            name: info.name.clone(),
+            kind: match info.device_type {
+                DeviceType::DiscreteGpu => AdapterKind::DiscreteGpu,
+                DeviceType::IntegratedGpu => AdapterKind::IntegratedGpu,
+                DeviceType::VirtualGpu => AdapterKind::VirtualGpu,
+                DeviceType::Cpu => AdapterKind::Cpu,
+                DeviceType::Other => AdapterKind::Other,
+            },
+            backend: format!("{backend:?}"),
+            driver: info.driver.clone(),
+            driver_info: info.driver_info.clone(),
+        }
+    }
+
     /// One line: name, kind, API and driver.
     pub fn describe(&self) -> String {
         format!(

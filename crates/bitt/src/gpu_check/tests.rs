@@ -173,6 +173,9 @@ fn cheap_stages_agree_on_flex() {
 #[test]
 fn the_dense_rasterizer_stage_runs_the_kernel_on_wgpu_without_readbacks() {
     let Some(wgpu) = bitt_testkit::wgpu() else {
+        eprintln!(
+            "SKIPPED the_dense_rasterizer_stage_runs_the_kernel_on_wgpu_without_readbacks: no wgpu adapter"
+        );
         return;
     };
     let r = stages::raster_comparison(&wgpu).unwrap();
