@@ -9,11 +9,13 @@
 //!   are tensor expressions whose autodiff is the analytic gradient (see [`ops`]), and
 //!   [`rasterize_dense`], the rasterizer as a backend operation with nvdiffrast's dense
 //!   per-pixel outputs left on the device (a CubeCL kernel on wgpu/CUDA, the core on all
-//!   cores elsewhere; the same face ids as [`cpu::rasterize`]);
+//!   cores elsewhere; the same face ids as [`cpu::rasterize`]), with its differentiable
+//!   dense counterparts [`dense_barycentrics`], [`interpolate_dense`] and
+//!   [`AntialiasPlan::from_dense`] that keep every decision on the device;
 //! * [`scene`] — cameras to clip space, Phong shading with a point light as the reference's
 //!   PyTorch3D setup computes it, several textured meshes in one depth test (the two
-//!   hands), image-to-UV unwrapping with visible masks, and the paper's texel visibility
-//!   statistics (Table 3).
+//!   hands; on a GPU without host readback), image-to-UV unwrapping with visible masks, and
+//!   the paper's texel visibility statistics (Table 3).
 //!
 //! # Conventions
 //! * **Input** positions are clip space `[V][4]` = (x, y, z, w) as produced by a projection;
@@ -52,8 +54,10 @@ mod texture;
 
 pub use error::{MAX_IMAGE_SIDE, RenderError};
 pub use ops::{
-    AntialiasPlan, DenseRaster, Raster, RasterKernel, SilhouettePairs, TexturePlan, Topology,
-    antialias, host_readbacks, interpolate, rasterize, rasterize_dense, silhouette_pairs, texture,
+    AntialiasPlan, DenseBarycentrics, DenseRaster, Raster, RasterKernel, SilhouettePairs,
+    TexturePlan, Topology, antialias, dense_barycentrics, host_readbacks, interpolate,
+    interpolate_dense, interpolate_dense_with_faces, rasterize, rasterize_dense, silhouette_pairs,
+    texture,
 };
 pub use raster::Fragments;
 

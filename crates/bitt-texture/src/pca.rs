@@ -12,8 +12,8 @@ use std::collections::HashMap;
 use std::path::Path;
 use std::sync::Mutex;
 
-use bitt_mesh::glam::DVec2;
 use bitt_mesh::UvLayout;
+use bitt_mesh::glam::DVec2;
 use burn::tensor::{Device, Tensor, TensorData};
 use rayon::prelude::*;
 use safetensors::Dtype;

@@ -212,7 +212,7 @@ impl ViewGeometry {
         Ok(SceneRender {
             image: self.shade(&g, gather, textures, light, settings)?,
             masks: g.masks.clone(),
-            raster: g.raster.clone(),
+            raster: g.raster()?.clone(),
             clip: g.clip.clone(),
         })
     }

@@ -24,7 +24,7 @@
 //! Screen coordinates here are pixels with pixel `(col, row)`'s centre at
 //! `(col + 1/2, row + 1/2)` = `((x/w + 1) W / 2, (y/w + 1) H / 2)`.
 
-use burn::tensor::{IndexingUpdateOp, Int, Tensor, activation::relu};
+use burn::tensor::{Bool, IndexingUpdateOp, Int, Tensor, activation::relu};
 
 use super::{Raster, Topology, check_shape, float_tensor, index_tensor};
 use crate::error::RenderError;
@@ -178,6 +178,10 @@ pub struct AntialiasPlan {
     to_back: Tensor<2>,
     /// `[1, K]`: how much of the back colour each front pixel takes (`relu(1/2 - t)`).
     to_front: Tensor<2>,
+    /// A plan made on the device ([`AntialiasPlan::from_dense`]) evaluates every adjacent
+    /// pixel pair: `[K]`, which of them straddle a silhouette, and `[K, 2]` the edge crossed.
+    #[cfg_attr(not(test), allow(dead_code))] // read by the tests' pair comparison
+    pub(super) dense_pairs: Option<(Tensor<1, Bool>, Tensor<2, Int>)>,
 }
 
 impl AntialiasPlan {
@@ -210,6 +214,7 @@ impl AntialiasPlan {
                 back,
                 to_back: Tensor::zeros([1, 0], &device),
                 to_front: Tensor::zeros([1, 0], &device),
+                dense_pairs: None,
             });
         }
         let idx = |f: &dyn Fn(usize) -> u32| {
@@ -217,15 +222,7 @@ impl AntialiasPlan {
         };
         let a = clip.clone().select(0, idx(&|i| pairs.edges[i][0]));
         let b = clip.select(0, idx(&|i| pairs.edges[i][1]));
-        let screen = |t: Tensor<2>| {
-            let x = t.clone().slice([0..k, 0..1]);
-            let y = t.clone().slice([0..k, 1..2]);
-            let cw = t.slice([0..k, 3..4]);
-            (
-                (x / cw.clone() + 1.0) * (w as f64 / 2.0),
-                (y / cw + 1.0) * (h as f64 / 2.0),
-            )
-        };
+        let screen = |t: Tensor<2>| screen_xy(t, h, w);
         let (ax, ay) = screen(a);
         let (bx, by) = screen(b);
         let centres = |pixels: &[u32]| {
@@ -259,12 +256,62 @@ impl AntialiasPlan {
             back,
             to_back: relu(t.clone() - 0.5),
             to_front: relu(t.neg() + 0.5),
+            dense_pairs: None,
         })
     }
 
-    /// Number of silhouette pixel pairs.
+    /// Number of silhouette pixel pairs; for a plan made by [`AntialiasPlan::from_dense`],
+    /// the number of adjacent pixel pairs evaluated (`H (W - 1) + (H - 1) W`), those off a
+    /// silhouette with zero weights.
     pub fn num_pairs(&self) -> usize {
         self.pairs
+    }
+
+    /// Assembles a plan from its pairs and blend weights (`[K]` pixel indices, `[1, K]`
+    /// weights).
+    pub(super) fn from_parts(
+        [height, width]: [usize; 2],
+        [front, back]: [Tensor<1, Int>; 2],
+        [to_back, to_front]: [Tensor<2>; 2],
+        dense_pairs: Option<(Tensor<1, Bool>, Tensor<2, Int>)>,
+    ) -> Self {
+        Self {
+            height,
+            width,
+            pairs: front.dims()[0],
+            front,
+            back,
+            to_back,
+            to_front,
+            dense_pairs,
+        }
+    }
+
+    /// For a plan made by [`AntialiasPlan::from_dense`]: the silhouette pairs it found as
+    /// host lists (one counted readback of each of four tensors), for tests.
+    #[cfg(test)]
+    pub(crate) fn dense_pairs_on_host(&self) -> Option<SilhouettePairs> {
+        let (found, edges) = self.dense_pairs.clone()?;
+        let ints = |t: Tensor<1, Int>| -> Vec<i64> {
+            super::count_readback();
+            t.into_data()
+                .convert::<i64>()
+                .try_into_vec::<i64>()
+                .unwrap_or_default()
+        };
+        let found = ints(found.int());
+        let (front, back) = (ints(self.front.clone()), ints(self.back.clone()));
+        let k = edges.dims()[0];
+        let edges = ints(edges.reshape([2 * k]));
+        let mut pairs = SilhouettePairs::default();
+        for i in (0..found.len()).filter(|&i| found[i] != 0) {
+            pairs.front.push(front[i] as u32);
+            pairs.back.push(back[i] as u32);
+            pairs
+                .edges
+                .push([edges[2 * i] as u32, edges[2 * i + 1] as u32]);
+        }
+        Some(pairs)
     }
 
     /// Antialiases `color`, an image of the plan's size.
@@ -304,4 +351,20 @@ impl AntialiasPlan {
             );
         Ok(out.reshape([c, h, w]))
     }
+}
+
+/// Screen coordinates in pixels (pixel `(col, row)`'s centre at `(col + 1/2, row + 1/2)`) of
+/// clip positions, as two columns.
+///
+/// # Shapes
+/// clip `[K, 4]` -> x `[K, 1]`, y `[K, 1]`
+pub(super) fn screen_xy(clip: Tensor<2>, h: usize, w: usize) -> (Tensor<2>, Tensor<2>) {
+    let k = clip.dims()[0];
+    let x = clip.clone().slice([0..k, 0..1]);
+    let y = clip.clone().slice([0..k, 1..2]);
+    let cw = clip.slice([0..k, 3..4]);
+    (
+        (x / cw.clone() + 1.0) * (w as f64 / 2.0),
+        (y / cw + 1.0) * (h as f64 / 2.0),
+    )
 }

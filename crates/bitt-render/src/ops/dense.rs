@@ -63,17 +63,8 @@ pub fn rasterize_dense(
     check_shape("clip", clip.dims(), [Some(v), Some(4)], || {
         format!("[V, 4] with V = {v} (the topology's vertices)")
     })?;
-    crate::error::check_image(width, height)?;
-    let host_reason = match crate::cube::rasterize(&clip, topology.faces(), height, width) {
-        Ok((face, bary, depth)) => {
-            return Ok(DenseRaster {
-                face,
-                bary,
-                depth,
-                kernel: RasterKernel::Cube,
-                host_reason: None,
-            });
-        }
+    let host_reason = match rasterize_on_device(&clip, topology, height, width)? {
+        Ok(dense) => return Ok(dense),
         Err(why) => why,
     };
     let device = clip.device();
@@ -91,4 +82,29 @@ pub fn rasterize_dense(
         kernel: RasterKernel::Host,
         host_reason: Some(host_reason),
     })
+}
+
+/// [`rasterize_dense`] when the CubeCL kernel can run on the clip tensor's device, or why
+/// not (then nothing was done). The clip shape must have been checked.
+///
+/// # Errors
+/// A zero or oversized image.
+pub(crate) fn rasterize_on_device(
+    clip: &Tensor<2>,
+    topology: &Topology,
+    height: usize,
+    width: usize,
+) -> Result<Result<DenseRaster, &'static str>, RenderError> {
+    crate::error::check_image(width, height)?;
+    Ok(
+        crate::cube::rasterize(clip, topology.faces(), height, width).map(|(face, bary, depth)| {
+            DenseRaster {
+                face,
+                bary,
+                depth,
+                kernel: RasterKernel::Cube,
+                host_reason: None,
+            }
+        }),
+    )
 }

@@ -21,23 +21,32 @@
 //! independent reference the tests compare these gradients against, next to finite
 //! differences.
 //!
-//! On wgpu (and CUDA) only the discrete part leaves the device: the clip positions are read
+//! With [`rasterize`] only the discrete part leaves the device: the clip positions are read
 //! back (`V x 4` floats) and the covered-pixel indices are uploaded (`3 N + N` integers for
-//! `N` covered pixels); everything differentiable stays on the GPU.
+//! `N` covered pixels); everything differentiable stays on the GPU. The dense path keeps the
+//! discrete part on the device too: [`rasterize_dense`] (a CubeCL kernel on wgpu/CUDA), then
+//! [`dense_barycentrics`], [`interpolate_dense`], [`TexturePlan`] and
+//! [`AntialiasPlan::from_dense`] over all `H W` pixels, with no host readback.
 //!
 //! # Per-pixel values
 //! A [`Raster`] lists its `N` covered pixels; per-pixel quantities are `[N, C]` tensors in that
 //! order (row `k` belongs to pixel [`Raster::covered`]`[k]`). [`Raster::to_image`] scatters
-//! them into a `[C, H, W]` image with a background.
+//! them into a `[C, H, W]` image with a background. A [`DenseBarycentrics`] and what is
+//! made from it have one row per pixel instead (`row * W + col`), zero on empty pixels.
 
 mod antialias;
-mod dense;
+mod antialias_dense;
+pub(crate) mod dense;
+pub(crate) mod dense_diff;
 mod interpolate;
 mod raster;
 mod texture;
 
 pub use antialias::{AntialiasPlan, SilhouettePairs, antialias, silhouette_pairs};
 pub use dense::{DenseRaster, RasterKernel, rasterize_dense};
+pub use dense_diff::{
+    DenseBarycentrics, dense_barycentrics, interpolate_dense, interpolate_dense_with_faces,
+};
 pub use interpolate::{interpolate, interpolate_with_faces};
 pub use raster::{Raster, rasterize};
 pub use texture::{TexturePlan, texture};
@@ -171,12 +180,30 @@ pub fn host_readbacks() -> u64 {
     HOST_READBACKS.load(std::sync::atomic::Ordering::Relaxed)
 }
 
+thread_local! {
+    /// [`HOST_READBACKS`] of the current thread alone (tests run in parallel threads).
+    static THREAD_READBACKS: std::cell::Cell<u64> = const { std::cell::Cell::new(0) };
+}
+
+/// Host readbacks made by this crate on the current thread (for tests that count a step's
+/// round trips while other tests run).
+#[cfg(test)]
+pub(crate) fn thread_host_readbacks() -> u64 {
+    THREAD_READBACKS.with(std::cell::Cell::get)
+}
+
+/// Counts one host readback.
+pub(crate) fn count_readback() {
+    HOST_READBACKS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    THREAD_READBACKS.with(|c| c.set(c.get() + 1));
+}
+
 /// Reads a float tensor back to the host (counted in [`host_readbacks`]).
 pub(crate) fn read_f32<const D: usize>(
     what: &'static str,
     tensor: burn::tensor::Tensor<D>,
 ) -> Result<Vec<f32>, RenderError> {
-    HOST_READBACKS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    count_readback();
     tensor
         .into_data()
         .convert::<f32>()

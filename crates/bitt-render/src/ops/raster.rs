@@ -229,7 +229,13 @@ fn barycentrics(
     ndc: Tensor<2>,
 ) -> (Tensor<2>, Tensor<1>) {
     let n = ndc.dims()[0];
-    let c = clip.select(0, corners).reshape([n, 3, 4]);
+    barycentrics_of(clip.select(0, corners).reshape([n, 3, 4]), ndc)
+}
+
+/// Perspective-correct barycentrics `[N, 3]` and depth `[N]` at pixel centres `ndc [N, 2]` of
+/// the triangles whose clip corners are `c [N, 3, 4]` (the expressions of [`rasterize`]).
+pub(super) fn barycentrics_of(c: Tensor<3>, ndc: Tensor<2>) -> (Tensor<2>, Tensor<1>) {
+    let n = ndc.dims()[0];
     let coord = |k: usize| c.clone().slice([0..n, 0..3, k..k + 1]).reshape([n, 3]);
     let (x, y, z, w) = (coord(0), coord(1), coord(2), coord(3));
     let p = ndc.clone().slice([0..n, 0..1]);

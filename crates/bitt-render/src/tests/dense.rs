@@ -10,7 +10,7 @@ use crate::raster::{Fragments, rasterize, rasterize_parallel};
 use crate::{RasterKernel, Topology, rasterize_dense};
 
 /// A named test scene: clip positions, faces, width, height.
-type TestScene = (&'static str, Vec<[f32; 4]>, Vec<[u32; 3]>, usize, usize);
+pub(super) type TestScene = (&'static str, Vec<[f32; 4]>, Vec<[u32; 3]>, usize, usize);
 
 /// Quads on a grid whose corners sit on pixel centres and edges, each split along a random
 /// diagonal, at w = 1: every rule of the top-left convention is exercised.
@@ -41,7 +41,7 @@ fn tiling() -> TestScene {
 }
 
 /// Random triangles in front of a perspective camera, overlapping in depth.
-fn soup(seed: u64, n: usize, width: usize, height: usize) -> TestScene {
+pub(super) fn soup(seed: u64, n: usize, width: usize, height: usize) -> TestScene {
     let cam = Camera {
         focal: 1.2,
         near: 0.1,
@@ -71,7 +71,7 @@ fn soup(seed: u64, n: usize, width: usize, height: usize) -> TestScene {
 }
 
 /// Triangles crossing the near plane and the eye plane (w = 0), and one wholly behind.
-fn near_plane() -> TestScene {
+pub(super) fn near_plane() -> TestScene {
     let cam = Camera {
         focal: 1.0,
         near: 0.5,

@@ -2,6 +2,9 @@
 
 mod coverage;
 mod dense;
+mod dense_aa;
+mod dense_diff;
+mod dense_scene;
 mod depth;
 mod errors;
 mod grads;

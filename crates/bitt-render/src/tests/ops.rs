@@ -17,7 +17,7 @@ fn flat(clip: &[[f32; 4]]) -> Vec<f32> {
 
 /// Random overlapping perspective triangles (camera-space depth 2..5) and their clip
 /// positions.
-fn scene(seed: u64, faces: usize) -> (Vec<[f32; 4]>, Vec<[u32; 3]>) {
+pub(super) fn scene(seed: u64, faces: usize) -> (Vec<[f32; 4]>, Vec<[u32; 3]>) {
     let cam = Camera {
         focal: 1.6,
         near: 0.1,
@@ -44,7 +44,7 @@ fn scene(seed: u64, faces: usize) -> (Vec<[f32; 4]>, Vec<[u32; 3]>) {
 }
 
 /// Unit cube (12 faces, shared vertices) seen at an angle.
-fn cube() -> (Vec<[f32; 4]>, Vec<[u32; 3]>) {
+pub(super) fn cube() -> (Vec<[f32; 4]>, Vec<[u32; 3]>) {
     let cam = Camera {
         focal: 1.5,
         near: 0.1,

@@ -177,17 +177,17 @@ fn phong_matches_an_independent_implementation() {
 
 /// Two procedural hands facing each other, fingers up, the right one in front of the left
 /// one's fingers, in front of a 96x96 pinhole camera.
-struct HandScene {
-    meshes: [TexturedMesh; 2],
-    vertices: [Vec<DVec3>; 2],
-    camera: Camera,
+pub(super) struct HandScene {
+    pub meshes: [TexturedMesh; 2],
+    pub vertices: [Vec<DVec3>; 2],
+    pub camera: Camera,
     /// Per hand: the 64x64 layout and the mesh faces (the left hand's corners are in
     /// mirrored order, so each hand needs its own texel barycentrics).
-    layouts: [TextureLayout; 2],
-    faces: [Vec<[u32; 3]>; 2],
+    pub layouts: [TextureLayout; 2],
+    pub faces: [Vec<[u32; 3]>; 2],
 }
 
-fn hand_scene(size: u32) -> HandScene {
+pub(super) fn hand_scene(size: u32) -> HandScene {
     let pair = procedural_pair();
     let facing = DMat3::from_cols(DVec3::Y, DVec3::X, DVec3::NEG_Z);
     let mirror = DMat3::from_diagonal(DVec3::new(-1.0, 1.0, 1.0));
@@ -238,7 +238,7 @@ fn hand_scene(size: u32) -> HandScene {
     }
 }
 
-fn vertex_tensor(v: &[DVec3], device: &Device) -> Tensor<2> {
+pub(super) fn vertex_tensor(v: &[DVec3], device: &Device) -> Tensor<2> {
     tensor2(
         v.iter()
             .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
@@ -584,7 +584,7 @@ fn a_reused_scene_geometry_shades_like_render() {
         let settings = RenderSettings::default();
         let once = SceneGeometry::new(&scene, &verts, &s.camera, &settings, &[[8, 8]; 2]).unwrap();
         assert!(
-            once.raster.num_covered() > 50,
+            once.raster().unwrap().num_covered() > 50,
             "{name}: hands cover the image"
         );
         let weights = Tensor::<3>::from_data(
