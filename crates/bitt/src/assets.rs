@@ -4,8 +4,8 @@
 use bitt_mesh::glam::DVec3;
 use bitt_mesh::{HandPair, Side, TwoHandScene};
 use bitt_render::scene::{
-    Camera, DepthRange, PointLight, RenderSettings, Scene, SceneGeometry, SceneRender,
-    TexelSurface, TexturedMesh,
+    Camera, DepthRange, GeometryPath, PointLight, RenderSettings, Scene, SceneGeometry,
+    SceneRender, TexelSurface, TexturedMesh,
 };
 use bitt_texture::{LayoutGather, TextureLayout};
 use std::sync::{Arc, Mutex};
@@ -107,8 +107,9 @@ pub struct ViewGeometry {
     cache: GeometryCache,
 }
 
-/// What identifies a [`SceneGeometry`] of one view: depth range, antialiasing, texture side.
-type CacheKey = (DepthRange, bool, usize);
+/// What identifies a [`SceneGeometry`] of one view: depth range, antialiasing, texture side,
+/// per-pixel layout.
+type CacheKey = (DepthRange, bool, usize, GeometryPath);
 
 /// The [`SceneGeometry`]s made so far, with their keys.
 type CacheEntries = Vec<(CacheKey, Arc<SceneGeometry>)>;
@@ -167,8 +168,8 @@ impl ViewGeometry {
         }
     }
 
-    /// The render geometry of this view for `settings` and square textures of side
-    /// `texture_size`, made on first use and then reused.
+    /// The render geometry of this view for `settings`, square textures of side
+    /// `texture_size` and a per-pixel layout, made on first use and then reused.
     ///
     /// # Errors
     /// As [`SceneGeometry::new`].
@@ -177,18 +178,20 @@ impl ViewGeometry {
         assets: &HandAssets,
         settings: &RenderSettings,
         texture_size: usize,
+        path: GeometryPath,
     ) -> Result<Arc<SceneGeometry>, BittError> {
-        let key = (settings.depth, settings.antialias, texture_size);
+        let key = (settings.depth, settings.antialias, texture_size, path);
         let mut cache = self.cache.0.lock().unwrap_or_else(|e| e.into_inner());
         if let Some((_, g)) = cache.iter().find(|(k, _)| *k == key) {
             return Ok(g.clone());
         }
-        let g = Arc::new(SceneGeometry::new(
+        let g = Arc::new(SceneGeometry::with_path(
             &assets.scene,
             &self.vertices,
             &self.camera,
             settings,
             &[[texture_size; 2]; 2],
+            path,
         )?);
         cache.push((key, g.clone()));
         Ok(g)
@@ -199,7 +202,9 @@ impl ViewGeometry {
         [self.camera.height(), self.camera.width()]
     }
 
-    /// Renders both hands with compact textures `[3, T]` (left, right) under `light`.
+    /// Renders both hands with compact textures `[3, T]` (left, right) under `light`, with
+    /// the host raster (the covered-pixel geometry, which has it at once: a view rendered
+    /// for unwrapping or scores is rendered once).
     pub fn render(
         &self,
         assets: &HandAssets,
@@ -208,7 +213,8 @@ impl ViewGeometry {
         light: &PointLight,
         settings: &RenderSettings,
     ) -> Result<SceneRender, BittError> {
-        let g = self.scene_geometry(assets, settings, assets.texture_size)?;
+        let path = GeometryPath::Covered;
+        let g = self.scene_geometry(assets, settings, assets.texture_size, path)?;
         Ok(SceneRender {
             image: self.shade(&g, gather, textures, light, settings)?,
             masks: g.masks.clone(),
@@ -217,7 +223,9 @@ impl ViewGeometry {
         })
     }
 
-    /// The image of [`ViewGeometry::render`] alone, `[3, H, W]` (nothing else is copied).
+    /// The image of [`ViewGeometry::render`] alone, `[3, H, W]` (nothing else is copied): the
+    /// training step's render, on the dense geometry where the CubeCL rasterizer runs (no
+    /// host readback), the covered one elsewhere.
     pub fn render_image(
         &self,
         assets: &HandAssets,
@@ -226,7 +234,8 @@ impl ViewGeometry {
         light: &PointLight,
         settings: &RenderSettings,
     ) -> Result<Tensor<3>, BittError> {
-        let g = self.scene_geometry(assets, settings, assets.texture_size)?;
+        let path = GeometryPath::Auto;
+        let g = self.scene_geometry(assets, settings, assets.texture_size, path)?;
         self.shade(&g, gather, textures, light, settings)
     }
 

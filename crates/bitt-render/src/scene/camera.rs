@@ -95,6 +95,27 @@ impl Camera {
         }
     }
 
+    /// Per point, the (unnormalised) direction towards the camera: to its centre for a
+    /// pinhole camera, the constant viewing direction for an orthographic one.
+    ///
+    /// # Shapes
+    /// points `[N, 3]` -> `[N, 3]`
+    pub fn directions_to_camera(&self, points: Tensor<2>) -> Tensor<2> {
+        let device = points.device();
+        let n = points.dims()[0];
+        match self {
+            Camera::Pinhole(_) => {
+                let c = self.center();
+                float_tensor(vec![c.x as f32, c.y as f32, c.z as f32], [1, 3], &device) - points
+            }
+            Camera::Orthographic(_) => {
+                let d = self.towards_camera(DVec3::ZERO);
+                float_tensor(vec![d.x as f32, d.y as f32, d.z as f32], [1, 3], &device)
+                    .repeat(&[n, 1])
+            }
+        }
+    }
+
     /// Clip positions of world points, differentiable in the points.
     ///
     /// # Shapes

@@ -71,7 +71,7 @@ impl DenseGeometry {
             let plan = TexturePlan::new(uv.clone(), th, tw)?;
             lookups.push((mask.clone().reshape([n, 1]), plan));
         }
-        let to_camera = fill_empty(super::geometry::to_camera(camera, points.clone()), &empty);
+        let to_camera = fill_empty(camera.directions_to_camera(points.clone()), &empty);
         Ok((
             Self {
                 empty,

@@ -64,10 +64,11 @@ enum Pixels {
     Dense(DenseGeometry),
 }
 
-/// Forces a [`SceneGeometry`] path (tests compare both on every device).
+/// Which per-pixel layout a [`SceneGeometry`] uses. The dense one needs no host readback on
+/// a device where the CubeCL rasterizer runs; the covered one does less work per shade and
+/// has the host [`Raster`] at once (what unwrapping and scoring read).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(not(test), allow(dead_code))] // only tests force the dense path
-pub(crate) enum GeometryPath {
+pub enum GeometryPath {
     /// Dense where the CubeCL rasterizer runs, covered pixels elsewhere.
     Auto,
     /// Covered pixels everywhere.
@@ -117,7 +118,10 @@ impl SceneGeometry {
     }
 
     /// [`SceneGeometry::new`] on a chosen path.
-    pub(crate) fn with_path(
+    ///
+    /// # Errors
+    /// As [`SceneGeometry::new`].
+    pub fn with_path(
         scene: &Scene,
         vertices: &[Tensor<2>],
         camera: &Camera,
@@ -213,7 +217,7 @@ impl SceneGeometry {
             for (pos, &row) in order.iter().enumerate() {
                 inverse[row] = pos as i64;
             }
-            let to_camera = to_camera(camera, points.clone());
+            let to_camera = camera.directions_to_camera(points.clone());
             Pixels::Covered(PixelGeometry {
                 normals,
                 points,
@@ -322,26 +326,6 @@ impl SceneGeometry {
         match &self.antialias {
             Some(plan) => plan.apply(image),
             None => Ok(image),
-        }
-    }
-}
-
-/// Per point, the (unnormalised) direction towards the camera: to its centre for a
-/// pinhole camera, the constant viewing direction for an orthographic one.
-///
-/// # Shapes
-/// points `[N, 3]` -> `[N, 3]`
-pub(super) fn to_camera(camera: &Camera, points: Tensor<2>) -> Tensor<2> {
-    let device = points.device();
-    let n = points.dims()[0];
-    match camera {
-        Camera::Pinhole(_) => {
-            let c = camera.center();
-            float_tensor(vec![c.x as f32, c.y as f32, c.z as f32], [1, 3], &device) - points
-        }
-        Camera::Orthographic(_) => {
-            let d = camera.towards_camera(bitt_mesh::glam::DVec3::ZERO);
-            float_tensor(vec![d.x as f32, d.y as f32, d.z as f32], [1, 3], &device).repeat(&[n, 1])
         }
     }
 }

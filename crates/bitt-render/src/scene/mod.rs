@@ -12,8 +12,7 @@ mod shading;
 mod unwrap;
 
 pub use camera::{Camera, DepthRange};
-pub(crate) use geometry::GeometryPath;
-pub use geometry::SceneGeometry;
+pub use geometry::{GeometryPath, SceneGeometry};
 pub use shading::{LightValues, Material, PointLight, phong, vertex_normals};
 pub use unwrap::{
     TexelSurface, TexelVisibilityStats, UnwrapPlan, UnwrapSettings, Unwrapped, unwrap,
