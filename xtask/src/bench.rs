@@ -20,6 +20,11 @@
 //! - `bench render [--runs N]`: the renderer's stages forward and backward on flex and on
 //!   wgpu (the `bench_render` example of `bitt`), wgpu against flex; see `bench_render.rs`.
 //!
+//! - `bench detect [--runs N] [PHOTO...]`: the two-hand search against one pass of
+//!   MediaPipe's own pipeline with the same networks (the `bench_detect` example of
+//!   `bitt-detect`), on each photo (default: the demo frames, when `../shared` is present) and
+//!   on a 1920 x 1080 canvas holding it enlarged.
+//!
 //! New benchmarks are another arm in [`bench`].
 
 use std::path::PathBuf;
@@ -32,7 +37,7 @@ pub fn bench(args: &[String]) -> Result<()> {
     let Some((what, rest)) = args.split_first() else {
         bail!(
             "usage: cargo xtask bench <btr|albedo|step|nets> [--preset P] [--runs N] [--conv C] \
-             | cargo xtask bench render [--runs N]"
+             | cargo xtask bench render [--runs N] | cargo xtask bench detect [--runs N] [PHOTO...]"
         );
     };
     match what.as_str() {
@@ -44,7 +49,18 @@ pub fn bench(args: &[String]) -> Result<()> {
             net_vs_torch("albedo", rest)
         }
         "render" => crate::bench_render::run(rest),
-        other => bail!("unknown benchmark `{other}`; try btr, albedo, step, nets, render"),
+        "detect" => {
+            let bin = crate::build_example("bench_detect")?;
+            let status = Command::new(&bin)
+                .args(rest)
+                .status()
+                .context("running the bench_detect example")?;
+            if !status.success() {
+                bail!("bench_detect failed ({status})");
+            }
+            Ok(())
+        }
+        other => bail!("unknown benchmark `{other}`; try btr, albedo, step, nets, render, detect"),
     }
 }
 

@@ -7,8 +7,11 @@
 //! - `test`: the whole test suite (release build) and then `e2e`.
 //! - `e2e`: the same computation on every backend (flex, ndarray, wgpu), compared.
 //! - `train-scene`, `eval`, `eval-merge`, `render-avatar`, `export`, `refine-hands`,
-//!   `fit-hands`, `pose-hands`, `convert-mano`, `texture`, `convert-html`, `render` ARGS:
-//!   forwarded to `bitt`.
+//!   `fit-hands`, `detect-hands`, `pose-hands`, `convert-mano`, `texture`, `convert-html`,
+//!   `render` ARGS: forwarded to `bitt`.
+//! - `convert-mediapipe --wheel-dir DIR`: the hand detector's built-in weights
+//!   (`crates/bitt-detect/assets/mediapipe_hands.safetensors`) from the unpacked
+//!   `mediapipe==0.10.21` wheel (`bitt convert-mediapipe`; `--out` replaces the file).
 //! - `synth [ARGS]`: synthetic scenes (default: the 24-scene benchmark), forwarded to `bitt`.
 //! - `metrics A.png B.png [--mask M] [--lpips W]`: one pair's image metrics (JSON), and
 //!   `convert-lpips --lin vgg.pth [--vgg vgg16-397923af.pth]`: LPIPS weights; forwarded.
@@ -412,14 +415,22 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some((cmd, rest)) = args.split_first() else {
         bail!(
-            "usage: cargo xtask <demo|test|e2e|train-scene|render-avatar|export|eval|eval-merge|metrics|convert-lpips|pose-hands|convert-mano|texture|convert-html|render|synth|fuzz|bench|gpu-bundle|gpu-check|check-clients|docs-images|mesh-noise-calibration|fuzz-seeds> [ARGS]"
+            "usage: cargo xtask <demo|test|e2e|train-scene|render-avatar|export|eval|eval-merge|metrics|convert-lpips|detect-hands|convert-mediapipe|fit-hands|refine-hands|pose-hands|convert-mano|texture|convert-html|render|synth|fuzz|bench|gpu-bundle|gpu-check|check-clients|docs-images|mesh-noise-calibration|fuzz-seeds> [ARGS]"
         );
     };
     match cmd.as_str() {
         "demo" => bitt(&[&["demo".to_string()], rest].concat()),
         "pose-hands" | "convert-mano" | "texture" | "convert-html" | "render" | "train-scene"
         | "render-avatar" | "synth" | "eval" | "eval-merge" | "metrics" | "convert-lpips"
-        | "refine-hands" | "fit-hands" | "export" => bitt(&args),
+        | "refine-hands" | "fit-hands" | "detect-hands" | "export" => bitt(&args),
+        "convert-mediapipe" => {
+            let mut all = args.clone();
+            if !rest.iter().any(|a| a == "--out" || a.starts_with("--out=")) {
+                let weights = root().join("crates/bitt-detect/assets/mediapipe_hands.safetensors");
+                all.extend(["--out".to_string(), weights.display().to_string()]);
+            }
+            bitt(&all)
+        }
         "test" => {
             let status = cargo()
                 .args(["test", "--workspace", "--release"])

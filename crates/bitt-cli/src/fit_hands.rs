@@ -1,14 +1,15 @@
 //! `bitt fit-hands`: fit both hands to a photo's 2D keypoints (OpenPose, MediaPipe or plain
-//! JSON); writes `hands.json`, `fit.json` and `overlay.png`. With `--scene`, the same fit on
-//! synthetic scenes from their noisy true keypoints, scored against the true hands.
+//! JSON, or without `--keypoints` those the built-in detector finds); writes `hands.json`,
+//! `fit.json` and `overlay.png`. With `--scene`, the same fit on synthetic scenes from their
+//! noisy true keypoints, scored against the true hands.
 
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use bitt::config_files::{refine_config, training_config};
 use bitt::fit::{
-    FitConfig, SyntheticFitSettings, check_fit_out, fit_eval_line, fit_eval_summary, fit_photo,
-    fit_synthetic_scenes, write_fit_eval, write_fit_outputs,
+    FitConfig, PhotoKeypoints, SyntheticFitSettings, check_fit_out, fit_eval_line,
+    fit_eval_summary, fit_photo, fit_synthetic_scenes, write_fit_eval, write_fit_outputs,
 };
 use bitt_nets::Preset;
 
@@ -19,11 +20,16 @@ use bitt::progress::{FitBar, RefineBar};
 /// Arguments of `bitt fit-hands`.
 #[derive(Debug, clap::Args)]
 pub struct FitHandsArgs {
-    /// A photo of two interacting hands (with --keypoints).
-    #[arg(long, requires = "keypoints", conflicts_with = "scene")]
+    /// A photo of two interacting hands. Without --keypoints, both hands are found by the
+    /// built-in detector first (as `bitt detect-hands`; an error naming the photo when it does
+    /// not find both), fitted to its keypoints with the default camera, and refined against
+    /// the photo: against --mask, else against the reference's rule (pixels whose mean RGB is
+    /// above 0.15 are hand). The folder also gets detection.json, keypoints.json and
+    /// detection_overlay.png.
+    #[arg(long, conflicts_with = "scene")]
     pub image: Option<PathBuf>,
     /// The photo's 2D hand keypoints: OpenPose JSON, MediaPipe HandLandmarker JSON or plain
-    /// JSON (see docs/keypoints.md).
+    /// JSON (see docs/keypoints.md). Without it the photo's hands are detected.
     #[arg(long, requires = "image")]
     pub keypoints: Option<PathBuf>,
     /// Keypoint format, mirroring, intrinsics and fit configuration.
@@ -33,8 +39,9 @@ pub struct FitHandsArgs {
     /// hands are refined against it (the silhouette refinement of `bitt refine-hands`).
     #[arg(long, requires = "image")]
     pub mask: Option<PathBuf>,
-    /// A refinement configuration (JSON) for --mask.
-    #[arg(long, requires = "mask")]
+    /// A refinement configuration (JSON) for the refinement (--mask, or a photo without
+    /// --keypoints).
+    #[arg(long, requires = "image")]
     pub refine_config: Option<PathBuf>,
     /// Synthetic scene folders (`bitt synth`), repeatable: fit each training view's true 2D
     /// joints (from `scene.json`) with noise and dropped points, and score the fit against
@@ -54,10 +61,10 @@ pub struct FitHandsArgs {
     /// of the scene's true ones.
     #[arg(long)]
     pub default_intrinsics: bool,
-    /// The hand models (and, with --mask, the texture prior of the refinement).
+    /// The hand models (and the texture prior of the refinement).
     #[command(flatten)]
     pub hands: HandsArgs,
-    /// Preset whose texture prior the --mask refinement uses.
+    /// Preset whose texture prior the refinement uses.
     #[arg(long, default_value = "quick")]
     pub preset: Preset,
     /// Backend.
@@ -66,7 +73,7 @@ pub struct FitHandsArgs {
     /// Output folder.
     #[arg(long, default_value = "runs/fit-hands")]
     pub out: PathBuf,
-    /// Cache folder for the fitted texture PCA (--mask).
+    /// Cache folder for the fitted texture PCA (the refinement).
     #[arg(long, default_value = "runs/cache")]
     pub cache: PathBuf,
 }
@@ -103,23 +110,42 @@ pub fn run(args: &FitHandsArgs) -> Result<()> {
     if !args.scene.is_empty() {
         return run_scenes(args, &config);
     }
-    let (Some(image), Some(keypoints)) = (&args.image, &args.keypoints) else {
-        bail!("give --image IMG --keypoints FILE, or --scene DIR...");
+    let Some(image) = &args.image else {
+        bail!("give --image IMG [--keypoints FILE], or --scene DIR...");
     };
+    if args.keypoints.is_some() && args.mask.is_none() && args.refine_config.is_some() {
+        bail!(
+            "--refine-config configures the refinement, which runs with --mask or, without \
+             --keypoints, against the photo; add --mask or drop --refine-config"
+        );
+    }
     check_fit_out(&args.out)?;
     let device = args.device.device()?.autodiff();
     let (hands, prior) = args.hands.sources();
-    let refine = match &args.mask {
-        Some(_) => Some((
+    // With a keypoint file the refinement needs --mask; detected hands are always refined.
+    let refine = match args.mask.is_some() || args.keypoints.is_none() {
+        true => Some((
             training_config(None, args.preset)?,
             refine_config(args.refine_config.as_deref(), None, None)?,
         )),
-        None => None,
+        false => None,
+    };
+    let source = args.keypoints.as_deref().map(|k| args.keypoint.source(k));
+    let keypoints = match &source {
+        Some(s) => PhotoKeypoints::File(s),
+        None => {
+            let found = bitt::detect::detect_photo(image, &device)?;
+            for line in found.lines() {
+                println!("{line}");
+            }
+            found.detection.require_both(image)?;
+            PhotoKeypoints::Detected(Box::new(found))
+        }
     };
     let mut refine_bar = RefineBar::default();
     let done = fit_photo(
         image,
-        &args.keypoint.source(keypoints),
+        keypoints,
         args.keypoint.intrinsics()?,
         args.mask.as_deref(),
         &hands,
@@ -136,12 +162,13 @@ pub fn run(args: &FitHandsArgs) -> Result<()> {
         &device,
         &mut FitBar::default(),
     )
-    .with_context(|| {
-        format!(
+    .with_context(|| match &args.keypoints {
+        Some(k) => format!(
             "fitting --image {} --keypoints {}",
             image.display(),
-            keypoints.display()
-        )
+            k.display()
+        ),
+        None => format!("fitting the hands detected in --image {}", image.display()),
     })?;
     eprintln!();
     write_fit_outputs(&args.out, &done)?;
@@ -194,6 +221,71 @@ mod tests {
             notes: Vec::new(),
         }
         .to_plain_json()
+    }
+
+    /// `fit-hands --image` alone: the hands are detected, fitted and refined against the
+    /// photo's threshold mask, and the folder also holds the detection. `--refine-config`
+    /// with keypoints but no mask (nothing to configure) is refused.
+    #[test]
+    fn photo_alone_is_detected_fitted_and_refined() {
+        let dir = scratch("cli-fit-photo");
+        let img = dir.join("hands.png");
+        bitt_tests::real_fixture::write_synthetic_photo(
+            &img,
+            bitt_tests::real_fixture::TWO_HAND_PHOTO_SEED,
+        );
+        let cfg = dir.join("refine.json");
+        std::fs::write(&cfg, r#"{"rigid_iterations": 2, "full_iterations": 3}"#).unwrap();
+        let out = dir.join("out");
+        let a = args(&[
+            "--image".into(),
+            s(&img),
+            "--refine-config".into(),
+            s(&cfg),
+            "--preset".into(),
+            "tiny".into(),
+            "--out".into(),
+            s(&out),
+            "--cache".into(),
+            s(&dir.join("cache")),
+        ]);
+        assert!(a.keypoints.is_none());
+        run(&a).unwrap();
+        for f in [
+            "hands.json",
+            "fit.json",
+            "overlay.png",
+            "detection.json",
+            "keypoints.json",
+            "detection_overlay.png",
+        ] {
+            assert!(out.join(f).is_file(), "{f} missing");
+        }
+        let record: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("fit.json")).unwrap()).unwrap();
+        assert_eq!(record["keypoints"], "detected in the photo");
+        assert_eq!(
+            record["refinement"]["mask"], "mean RGB above 0.15",
+            "{record}"
+        );
+        assert_eq!(record["report"]["hands"].as_array().unwrap().len(), 2);
+        let e = format!(
+            "{:#}",
+            run(&args(&[
+                "--image".into(),
+                s(&img),
+                "--keypoints".into(),
+                s(&out.join("keypoints.json")),
+                "--refine-config".into(),
+                s(&cfg),
+                "--out".into(),
+                s(&dir.join("other")),
+            ]))
+            .unwrap_err()
+        );
+        assert!(e.contains("--refine-config"), "{e}");
+        assert!(!dir.join("other").exists());
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     /// A photo with its keypoints fits and writes the three files; `hands.json` is an

@@ -8,6 +8,7 @@ mod args;
 mod avatar_pose;
 mod backend_check;
 mod demo;
+mod detect_hands;
 mod device;
 mod eval;
 mod export;
@@ -95,9 +96,21 @@ enum Command {
     RefineHands(refine_hands::RefineHandsArgs),
     /// Fit both hands to a photo's 2D keypoints (OpenPose, MediaPipe or plain JSON), with
     /// the photo's intrinsics or a default camera, optionally refined against a hand mask;
-    /// writes hands.json (an annotation for train-scene), fit.json and overlay.png. With
-    /// --scene, the fit on synthetic scenes scored against their true hands.
+    /// without --keypoints, to the hands the built-in detector finds, refined against the
+    /// photo. Writes hands.json (an annotation for train-scene), fit.json and overlay.png.
+    /// With --scene, the fit on synthetic scenes scored against their true hands.
     FitHands(fit_hands::FitHandsArgs),
+    /// Find both hands in a photo with the built-in detector (MediaPipe Hands' networks on
+    /// burn and a two-hand search); writes keypoints.json, detection.json and overlay.png,
+    /// and prints each hand found. No hand: an error, nothing written; one hand: written,
+    /// with a warning naming the missing one.
+    DetectHands(detect_hands::DetectHandsArgs),
+    /// Convert MediaPipe Hands' TFLite models from the mediapipe 0.10.21 wheel into the
+    /// detector's weights file (fp16 safetensors, built into bitt): `pip download --no-deps
+    /// mediapipe==0.10.21`, unzip the wheel into DIR, then `bitt convert-mediapipe
+    /// --wheel-dir DIR --out crates/bitt-detect/assets/mediapipe_hands.safetensors` (or
+    /// `cargo xtask convert-mediapipe --wheel-dir DIR`) and rebuild.
+    ConvertMediapipe(detect_hands::ConvertMediapipeArgs),
     /// Render a trained run's avatar at another view (`--view AZ,EL`), pose or light.
     RenderAvatar(render_avatar::RenderAvatarArgs),
     /// Write a trained run's avatar again without retraining: rigged glTF (default, with the
@@ -160,6 +173,8 @@ fn main() -> Result<()> {
         Command::Export(args) => export::run(&args),
         Command::RefineHands(args) => refine_hands::run(&args),
         Command::FitHands(args) => fit_hands::run(&args),
+        Command::DetectHands(args) => detect_hands::run(&args),
+        Command::ConvertMediapipe(args) => detect_hands::convert(&args),
         Command::Eval(args) => eval::run(&args),
         Command::EvalMerge(args) => eval::merge_cmd(&args),
         Command::ImageDiff { a, b } => render::image_diff(&a, &b),

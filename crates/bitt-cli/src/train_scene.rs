@@ -1,5 +1,6 @@
-//! `bitt train-scene`: train BiTT on one scene (synthetic, or real data: an image with its
-//! annotation pickle, or an InterHand2.6M scene) and write the run folder (the main job).
+//! `bitt train-scene`: train BiTT on one scene (synthetic, or real data: a photo with its
+//! annotation pickle or keypoints or alone, or an InterHand2.6M scene) and write the run
+//! folder (the main job).
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -32,9 +33,15 @@ pub struct TrainSceneArgs {
     #[arg(long)]
     pub scene: Option<PathBuf>,
     /// Real data: a photograph of two interacting hands, with --annotation (whose camera is
-    /// for the reference's 256x256 crop, the BiTT demo `NN.jpg`) or with --keypoints (any
-    /// size; the hands are fitted to them first, as `bitt fit-hands` does).
-    #[arg(long, requires = "image_hands", conflicts_with_all = ["scene", "interhand"])]
+    /// for the reference's 256x256 crop, the BiTT demo `NN.jpg`), with --keypoints (any
+    /// size; the hands are fitted to them first, as `bitt fit-hands` does), or alone (any
+    /// size): both hands are found by the built-in detector, fitted to its keypoints with
+    /// the default camera and refined against the photo (--mask, else pixels whose mean RGB
+    /// is above 0.15 are hand) before training. The run folder keeps the detection
+    /// (detection.json, keypoints.json, detection_overlay.png; report.html shows it) and
+    /// the fit (fit.json, fit_overlay.png). An error names the photo when not both hands are
+    /// found.
+    #[arg(long, conflicts_with_all = ["scene", "interhand"])]
     pub image: Option<PathBuf>,
     /// Real data: the image's BiTT annotation pickle (the demo `NN.pkl` layout) or a
     /// `hands.json` (`bitt refine-hands`, `bitt fit-hands`).
@@ -48,9 +55,9 @@ pub struct TrainSceneArgs {
     /// Keypoint format, mirroring, intrinsics and fit configuration (with --keypoints).
     #[command(flatten)]
     pub keypoint: KeypointArgs,
-    /// With --image --keypoints: the photo's hand mask (white = hand); the fitted hands are
-    /// then refined against it before training.
-    #[arg(long, requires = "keypoints")]
+    /// With --image --keypoints, or --image alone: the photo's hand mask (white = hand); the
+    /// fitted hands are then refined against it before training.
+    #[arg(long, requires = "image", conflicts_with = "annotation")]
     pub mask: Option<PathBuf>,
     /// Real data: the InterHand2.6M root; selects a scene (training view, novel views of the
     /// same frame, novel poses of the same capture; see docs/training.md for the rule).
@@ -112,8 +119,9 @@ pub struct TrainSceneArgs {
     /// gets `refine.json` and `overlay.png`, and trains on the refined meshes.
     #[arg(long)]
     pub refine_mesh: bool,
-    /// A refinement configuration (JSON) for --refine-mesh.
-    #[arg(long, requires = "refine_mesh")]
+    /// A refinement configuration (JSON) for --refine-mesh, and for the refinement of a
+    /// photo given alone.
+    #[arg(long)]
     pub refine_config: Option<PathBuf>,
 }
 
@@ -149,17 +157,27 @@ fn request(args: &TrainSceneArgs) -> Result<FreshRequest<'_>> {
         intrinsics: args.keypoint.intrinsics.clone(),
         config: args.keypoint.fit_config.clone(),
     };
+    let photo_only = args.image.is_some() && args.annotation.is_none() && args.keypoints.is_none();
+    if args.refine_config.is_some() && !args.refine_mesh && !photo_only {
+        bail!(
+            "--refine-config configures --refine-mesh, or the refinement of a photo given alone \
+             (--image without --annotation or --keypoints)"
+        );
+    }
     let input = match (&args.image, &args.annotation, &args.interhand) {
-        (Some(image), None, _) => {
-            let Some(path) = &args.keypoints else {
-                bail!("--image needs --annotation PKL or --keypoints FILE");
-            };
-            SceneInput::PhotoKeypoints {
+        (Some(image), None, _) => match &args.keypoints {
+            Some(path) => SceneInput::PhotoKeypoints {
                 image,
                 keypoints: keypoints(path),
                 mask: args.mask.as_deref(),
-            }
-        }
+            },
+            None => SceneInput::Photo {
+                image,
+                mask: args.mask.as_deref(),
+                fit: args.keypoint.fit_config.clone(),
+                refine: refine_config(args.refine_config.as_deref(), None, None)?,
+            },
+        },
         (Some(image), Some(annotation), _) => SceneInput::PhotoAnnotation { image, annotation },
         (None, _, Some(root)) => SceneInput::InterHand {
             root,
@@ -266,7 +284,9 @@ mod tests {
     use bitt::real::RealInput;
     use bitt::run_folder::load_checkpoints;
     use bitt_nets::Preset;
-    use bitt_tests::real_fixture::{AnnotationOptions, scratch, write_annotation, write_image};
+    use bitt_tests::real_fixture::{
+        AnnotationOptions, TWO_HAND_PHOTO_SEED, scratch, write_annotation, write_image,
+    };
 
     type Cli = crate::test_args::Parsed<TrainSceneArgs>;
 
@@ -660,6 +680,94 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
     }
 
+    /// `train-scene --image IMG` alone: detect, fit, refine, train; the run folder keeps the
+    /// detection, the report shows it, `input.json` records it, and `--resume` continues
+    /// without detecting again.
+    #[test]
+    fn photo_only_detects_fits_refines_trains_and_resumes() {
+        let dir = scratch("cli-photo-only");
+        let img = dir.join("hands.png");
+        bitt_tests::real_fixture::write_synthetic_photo(&img, TWO_HAND_PHOTO_SEED);
+        let cfg = dir.join("refine.json");
+        std::fs::write(&cfg, r#"{"rigid_iterations": 2, "full_iterations": 3}"#).unwrap();
+        let (out, cache) = (dir.join("run"), dir.join("cache"));
+        run(&args(&[
+            "--image",
+            s(&img),
+            "--refine-config",
+            s(&cfg),
+            "--cache",
+            s(&cache),
+            "--out",
+            s(&out),
+            "--iterations",
+            "2",
+        ]))
+        .unwrap();
+        for f in [
+            "detection.json",
+            "detection_overlay.png",
+            "keypoints.json",
+            "fit.json",
+            "fit_overlay.png",
+            "input.json",
+            "report.html",
+            "avatar.glb",
+        ] {
+            assert!(out.join(f).is_file(), "{f} missing");
+        }
+        let read = |f: &str| -> serde_json::Value {
+            serde_json::from_str(&std::fs::read_to_string(out.join(f)).unwrap()).unwrap()
+        };
+        let detection = read("detection.json");
+        for side in ["left", "right"] {
+            assert!(
+                detection[side]["presence"].as_f64().unwrap() >= 0.5,
+                "{detection}"
+            );
+        }
+        let fit = read("fit.json");
+        assert_eq!(fit["keypoints"], "detected in the photo");
+        assert_eq!(fit["refinement"]["mask"], "mean RGB above 0.15", "{fit}");
+        let input = read("input.json");
+        assert_eq!(input["source"]["kind"], "detected");
+        let report = || std::fs::read_to_string(out.join("report.html")).unwrap();
+        let overlay = std::fs::read(out.join("detection_overlay.png")).unwrap();
+        let embedded = bitt::outputs::base64(&overlay);
+        let first = report();
+        assert!(
+            first.contains("Hand detection") && first.contains("hand detection: left presence")
+        );
+        assert!(
+            first.contains(&embedded),
+            "the report does not show the overlay"
+        );
+        // --resume continues from the record: the detection is not made again.
+        let detection_bytes = std::fs::read(out.join("detection.json")).unwrap();
+        let resume = Cli::try_parse_from([
+            "bitt",
+            "--resume",
+            s(&out),
+            "--iterations",
+            "3",
+            "--cache",
+            s(&cache),
+            "--turntable",
+            "0",
+        ])
+        .unwrap()
+        .args;
+        run(&resume).unwrap();
+        assert_eq!(read("metrics.json")["history"].as_array().unwrap().len(), 3);
+        assert_eq!(
+            std::fs::read(out.join("detection.json")).unwrap(),
+            detection_bytes
+        );
+        let again = report();
+        assert!(again.contains("Hand detection") && again.contains(&embedded));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
     /// Bad real inputs fail before the run folder is created.
     #[test]
     fn bad_real_inputs_write_nothing() {
@@ -695,13 +803,56 @@ mod tests {
         let e = attempt(&img, &pkl, &["--model-dir", s(&dir.join("mano"))]);
         assert!(e.contains("HTML"), "{e}");
         assert!(!out.exists(), "a failed run created {}", out.display());
-        // Real-data options need real data; --image needs --annotation.
+        // Real-data options need real data. A photo alone is the photo-only path, which
+        // takes a mask and a refinement configuration; --mask needs a photo and no annotation.
         let e = format!(
             "{:#}",
             run(&args(&["--model-dir", "x", "--out", s(&out)])).unwrap_err()
         );
         assert!(e.contains("real data"), "{e}");
-        assert!(Cli::try_parse_from(["bitt", "--image", s(&img)]).is_err());
+        let photo = Cli::try_parse_from([
+            "bitt",
+            "--image",
+            s(&img),
+            "--mask",
+            "m.png",
+            "--refine-config",
+            "r.json",
+            "--fit-config",
+            "f.json",
+        ])
+        .unwrap()
+        .args;
+        assert!(photo.annotation.is_none() && photo.keypoints.is_none());
+        assert!(Cli::try_parse_from(["bitt", "--mask", "m.png"]).is_err());
+        assert!(
+            Cli::try_parse_from([
+                "bitt",
+                "--image",
+                s(&img),
+                "--annotation",
+                s(&pkl),
+                "--mask",
+                "m.png"
+            ])
+            .is_err()
+        );
+        // --refine-config configures --refine-mesh or the photo-only refinement.
+        let e = format!(
+            "{:#}",
+            run(&args(&[
+                "--image",
+                s(&img),
+                "--annotation",
+                s(&pkl),
+                "--refine-config",
+                "r.json",
+                "--out",
+                s(&out)
+            ]))
+            .unwrap_err()
+        );
+        assert!(e.contains("--refine-config"), "{e}");
         // Malformed keypoints are named and leave no run folder.
         let bad_kp = dir.join("bad_keypoints.json");
         std::fs::write(&bad_kp, r#"{"right": [[1, 2, 1]]}"#).unwrap();

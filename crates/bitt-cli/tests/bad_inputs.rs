@@ -384,5 +384,31 @@ fn bad_runs_and_paths_are_named() {
         &["vgg.pth"],
     );
     // Usage errors are clap's (exit 2), naming the missing option.
-    case.fails(&["train-scene", "--image", &img], 2, &["--annotation"]);
+    case.fails(&["train-scene", "--mask", &img], 2, &["--image"]);
+}
+
+/// The photo-only path (`detect-hands`, `fit-hands` and `train-scene` given a photo alone)
+/// on a photo without hands (a grey image), a file that is not an image and a missing photo:
+/// each fails naming the photo, and nothing is written (not even the default folders).
+#[test]
+fn photos_without_hands_are_refused_naming_the_photo() {
+    let case = Case::new("photo-only");
+    write_image(
+        &case.path("grey.png"),
+        256,
+        192,
+        Some(&|_, _| [128, 128, 128]),
+    );
+    std::fs::write(case.path("text.jpg"), "not an image").unwrap();
+    for (file, problem) in [
+        ("grey.png", "no hand found"),
+        ("text.jpg", "cannot decode image"),
+        ("missing.jpg", "not found"),
+    ] {
+        let image = case.s(file);
+        case.fails(&["detect-hands", "--image", &image], 1, &[file, problem]);
+        case.fails(&["fit-hands", "--image", &image], 1, &[file, problem]);
+        let args = train(&case, &["--image", &image]);
+        case.fails(&strs(&args), 1, &[file, problem]);
+    }
 }

@@ -49,6 +49,9 @@ pub enum BittError {
     /// From the synthetic generator.
     #[error(transparent)]
     Synth(#[from] bitt_synth::SynthError),
+    /// From the hand detector.
+    #[error(transparent)]
+    Detect(#[from] bitt_detect::DetectError),
     /// What was being done (an option and its file, a scene) when `source` went wrong.
     #[error("{context}")]
     Context {

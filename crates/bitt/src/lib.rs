@@ -32,6 +32,8 @@
 //! - [`hand_layer`]: the hand model as a differentiable burn function (both hands batched).
 //! - [`refine`]: mesh refinement of both hands against the photo through the renderer.
 //! - [`hand_priors`]: joint-angle, off-axis and penetration priors shared by `refine` and `fit`.
+//! - [`detect`]: both hands found in a photo by the built-in detector (`bitt-detect`), the
+//!   detection's files and overlay (`bitt detect-hands`, the photo-only path).
 //! - [`fit`]: both hands fitted to 2D keypoints (OpenPose, MediaPipe, plain JSON).
 //! - [`real`]: real data (an image + annotation pickle, InterHand2.6M scenes), real runs.
 //! - [`backend_check`], [`nets_bench`], [`gpu_check`]: a fixed computation to compare
@@ -47,6 +49,7 @@ pub mod checkpoint;
 pub mod config;
 pub mod config_files;
 pub mod demo;
+pub mod detect;
 mod error;
 pub mod evaluate;
 pub mod figure;

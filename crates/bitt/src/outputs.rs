@@ -148,6 +148,52 @@ pub fn base64(bytes: &[u8]) -> String {
     out
 }
 
+/// The enlargement of an overlay drawn on an image `width` pixels wide: at least 512 wide.
+pub fn overlay_scale(width: usize) -> usize {
+    512usize.div_ceil(width.max(1)).clamp(1, 8)
+}
+
+/// Writes `files` (name, bytes) into the folder `out` so that they appear together: they are
+/// written into a temporary folder next to `out` (`.NAME.tmpPID`), which becomes `out` when
+/// `out` does not exist yet; into an existing folder (an earlier output of the same command)
+/// they are moved one by one in the order given, so put last the file that marks a folder as
+/// complete. A failure leaves no temporary behind and, for a new folder, no folder.
+///
+/// # Errors
+/// A file or folder that cannot be written or moved.
+pub fn write_files_together(out: &Path, files: &[(&str, Vec<u8>)]) -> Result<(), BittError> {
+    let parent = match out.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => std::path::PathBuf::from("."),
+    };
+    let name = out
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "out".into());
+    std::fs::create_dir_all(&parent).map_err(|e| BittError::io(&parent, e))?;
+    let tmp = parent.join(format!(".{name}.tmp{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&tmp);
+    let result = (|| -> Result<(), BittError> {
+        std::fs::create_dir(&tmp).map_err(|e| BittError::io(&tmp, e))?;
+        for (file, bytes) in files {
+            let path = tmp.join(file);
+            let mut f = std::fs::File::create(&path).map_err(|e| BittError::io(&path, e))?;
+            std::io::Write::write_all(&mut f, bytes).map_err(|e| BittError::io(&path, e))?;
+            f.sync_all().map_err(|e| BittError::io(&path, e))?;
+        }
+        if !out.exists() {
+            return std::fs::rename(&tmp, out).map_err(|e| BittError::io(out, e));
+        }
+        for (file, _) in files {
+            let to = out.join(file);
+            std::fs::rename(tmp.join(file), &to).map_err(|e| BittError::io(&to, e))?;
+        }
+        Ok(())
+    })();
+    let _ = std::fs::remove_dir_all(&tmp);
+    result
+}
+
 /// Refuses an output folder that exists, is not empty and holds no `marker` file (so is not an
 /// earlier output of `command`): nothing of the user's is overwritten.
 ///

@@ -187,6 +187,41 @@ fn draw_label(img: &mut image::RgbImage, font: &FontRef<'_>, label: &Label) {
     }
 }
 
+/// The width in pixels of `text` at pixel scale `size` in the embedded font.
+///
+/// # Errors
+/// Only if the embedded font cannot be read.
+pub fn text_width(text: &str, size: f32) -> Result<f32, BittError> {
+    Ok(layout(&font()?, text, size).1)
+}
+
+/// Draws `text` onto `img` in the embedded font (as the plot's labels: sub-pixel glyph
+/// positions, kerning, antialiased coverage blended over what is there), left-aligned with
+/// the top of its capitals at `at`, at pixel scale `size`, in `color`; pixels outside the
+/// image are dropped. Other pictures than the plot (the hand detection's overlay) label
+/// themselves with it.
+///
+/// # Errors
+/// Only if the embedded font cannot be read.
+pub fn draw_text(
+    img: &mut image::RgbImage,
+    text: &str,
+    size: f32,
+    at: (f32, f32),
+    color: [u8; 3],
+) -> Result<(), BittError> {
+    let label = Label {
+        text: text.to_string(),
+        size,
+        at,
+        align: (HAlign::Left, VAlign::Top),
+        color: RGBColor(color[0], color[1], color[2]),
+        vertical: false,
+    };
+    draw_label(img, &font()?, &label);
+    Ok(())
+}
+
 /// Writes the loss plot of `history` (one entry per iteration, the first at iteration 1) to
 /// `path` as a PNG, atomically; `schedule` gives the learning-rate steps to mark.
 ///

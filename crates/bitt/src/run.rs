@@ -511,6 +511,22 @@ pub fn write_run(
             ),
         );
     }
+    let detection = crate::detect::read_detection(dir)?;
+    let detection_overlay = dir.join(crate::detect::DETECTION_OVERLAY);
+    if let Some(d) = &detection
+        && detection_overlay.is_file()
+    {
+        gallery.insert(
+            0,
+            (
+                format!(
+                    "hand detection: {} (left orange, right blue)",
+                    crate::detect::detection_summary(d)
+                ),
+                detection_overlay,
+            ),
+        );
+    }
     let metrics = serde_json::json!({
         "summary": summary,
         "loss_terms": crate::LossTerms::NAMES,
@@ -533,6 +549,7 @@ pub fn write_run(
         trainer,
         &summary,
         refinement.as_ref(),
+        detection.as_ref(),
         &gallery,
     )?;
     Ok(summary)
@@ -645,6 +662,7 @@ fn write_report(
     trainer: &Trainer,
     summary: &RunSummary,
     refinement: Option<&serde_json::Value>,
+    detection: Option<&serde_json::Value>,
     gallery: &[(String, PathBuf)],
 ) -> Result<(), BittError> {
     let mut html = String::from(
@@ -721,6 +739,9 @@ fn write_report(
             ));
         }
     }
+    if let Some(d) = detection {
+        html.push_str(&detection_html(d));
+    }
     if let Some(r) = refinement {
         let num = |k: &str| {
             r["report"][k]
@@ -776,6 +797,37 @@ fn write_report(
     html.push_str("</body></html>\n");
     bitt_mesh::export::write_atomically(path, html.as_bytes())?;
     Ok(())
+}
+
+/// The report's section on the hand detection of a photo-only run (`detection.json`).
+fn detection_html(record: &serde_json::Value) -> String {
+    let f = |v: f64| {
+        if v.is_finite() {
+            format!("{v:.3}")
+        } else {
+            "n/a".into()
+        }
+    };
+    let mut html = format!(
+        "<h2>Hand detection</h2><p>Only the photo was given: the built-in detector (MediaPipe \
+         Hands' palm and landmark networks and a two-hand search) found both hands in {} s, \
+         the hands were fitted to its keypoints and refined against the photo before training \
+         (the overlay is below: left hand orange, right hand blue).</p>\
+         <table><tr><th>hand</th><th>presence</th><th>probability of its side</th>\
+         <th>palm score</th><th>found by</th></tr>",
+        f(record["seconds"].as_f64().unwrap_or(f64::NAN)),
+    );
+    for (side, presence, side_p, palm, stage) in crate::detect::recorded_hands(record) {
+        html.push_str(&format!(
+            "<tr><td>{side}</td><td>{}</td><td>{}</td><td>{}</td><td>{} stage</td></tr>",
+            f(presence),
+            f(side_p),
+            palm.map_or("n/a".into(), f),
+            escape(&stage),
+        ));
+    }
+    html.push_str("</table>");
+    html
 }
 
 fn escape(s: &str) -> String {

@@ -1,7 +1,7 @@
 //! Where a run goes and what it starts from: the names a run writes at the top of its
 //! folder, whether a folder is free for a new run ([`out_folder`], [`fresh_out`]), a fresh
-//! run's first files ([`write_fresh_run`]: configuration, input, keypoint fit, refinement),
-//! and a resumed run's checkpoints ([`load_checkpoints`]).
+//! run's first files ([`write_fresh_run`]: configuration, input, keypoint fit and detection,
+//! refinement), and a resumed run's checkpoints ([`load_checkpoints`]).
 
 use std::path::{Path, PathBuf};
 
@@ -23,7 +23,7 @@ pub const FIT_RECORD: &str = "fit.json";
 pub const FIT_OVERLAY: &str = "fit_overlay.png";
 
 /// Names a run writes at the top of its folder.
-pub const RUN_NAMES: [&str; 20] = [
+pub const RUN_NAMES: [&str; 23] = [
     files::CONFIG,
     files::CHECKPOINT,
     files::CHECKPOINT_PREVIOUS,
@@ -38,6 +38,9 @@ pub const RUN_NAMES: [&str; 20] = [
     files::REFINE_OVERLAY,
     FIT_RECORD,
     FIT_OVERLAY,
+    crate::detect::DETECTION_JSON,
+    crate::detect::KEYPOINTS_JSON,
+    crate::detect::DETECTION_OVERLAY,
     files::REAL_SCORES,
     crate::real::files::INPUT,
     crate::real::files::INPUT_DIR,
@@ -223,13 +226,16 @@ pub fn check_utf8_paths(paths: &[(&str, Option<&Path>)]) -> Result<(), BittError
     Ok(())
 }
 
-/// A keypoint fit to record in the run folder: [`FIT_RECORD`] and its overlay.
+/// A keypoint fit to record in the run folder: [`FIT_RECORD`] and its overlay, and the
+/// detection its keypoints came from (a photo alone).
 #[derive(Debug, Clone)]
 pub struct FitOutput {
     /// The record (`fit.json`).
     pub record: serde_json::Value,
     /// The overlay image `[3, H, W]` and its `[H, W]`.
     pub overlay: (Vec<f32>, [usize; 2]),
+    /// The detection (`detection.json`, `keypoints.json`, `detection_overlay.png`).
+    pub detection: Option<crate::detect::DetectionFiles>,
 }
 
 /// Creates a fresh run's folder `out` and writes what it starts from: `config.json`, the
@@ -257,6 +263,9 @@ pub fn write_fresh_run(
         write_json(&out.join(FIT_RECORD), &f.record)?;
         let [h, w] = f.overlay.1;
         write_png(&out.join(FIT_OVERLAY), &f.overlay.0, h, w)?;
+        if let Some(d) = &f.detection {
+            d.write_into(out)?;
+        }
     }
     if let Some(r) = refinement {
         let truth = input.synthetic().map(|scene| &scene.train.hands);

@@ -1,5 +1,6 @@
 //! `train-scene`'s job as library calls: what a fresh run trains on ([`fresh_run`]: a
-//! synthetic scene, a photo with its annotation or keypoints, an InterHand2.6M scene), a
+//! synthetic scene, a photo with its annotation or keypoints or alone, an InterHand2.6M
+//! scene), a
 //! resumed run's trainer ([`resumed_run`]) and the results written when training ends
 //! ([`finish_run`]).
 
@@ -18,7 +19,8 @@ use crate::config::TrainConfig;
 use crate::config_files::fit_config;
 use crate::error::WithContext;
 use crate::fit::{
-    FitObserver, KeypointSource, fit_keypoints, fit_photo, parse_intrinsics, record_synthetic_fit,
+    FitObserver, KeypointSource, PhotoKeypoints, fit_keypoints, fit_photo, parse_intrinsics,
+    record_synthetic_fit,
 };
 use crate::real::{
     HandSource, PriorSource, RealInput, RealRunSettings, RealScores, annotation_setup,
@@ -83,6 +85,18 @@ pub enum SceneInput<'a> {
         /// Its hand mask (white = hand).
         mask: Option<&'a Path>,
     },
+    /// A photo of two hands alone: both are found by the built-in detector, fitted to its
+    /// keypoints and refined against the photo (its hand mask, else the threshold rule).
+    Photo {
+        /// The photo.
+        image: &'a Path,
+        /// Its hand mask (white = hand).
+        mask: Option<&'a Path>,
+        /// The keypoint fit's configuration file (`None`: the default configuration).
+        fit: Option<PathBuf>,
+        /// The refinement's configuration.
+        refine: RefineConfig,
+    },
     /// A photo of two hands with its annotation (a BiTT pickle or `hands.json`).
     PhotoAnnotation {
         /// The photo.
@@ -130,6 +144,9 @@ pub struct FreshRun {
     /// The keypoint fit, with keypoints.
     pub fit: Option<FitOutput>,
 }
+
+/// The line a photo-only run ([`SceneInput::Photo`]) starts with.
+pub const PHOTO_ONLY_LINE: &str = "photo only: detecting both hands, fitting them to the keypoints, refining against the photo, then training";
 
 /// The procedural texture PCA of `config.texture`, from the cache or fitted (with a progress
 /// display) and cached.
@@ -211,7 +228,7 @@ pub fn fresh_run(
             let mut fit_bar = observer.fit();
             let fit = fit_photo(
                 image,
-                &keypoints.source,
+                PhotoKeypoints::File(&keypoints.source),
                 keypoints.intrinsics()?,
                 *mask,
                 hands,
@@ -234,10 +251,71 @@ pub fn fresh_run(
                 observer.say(&format!("note: {n}"));
             }
             let settings = real_settings(config, refine.take());
-            let setup = keypoint_setup(&fit, image, path, settings)?;
+            let setup = keypoint_setup(&fit, image, Some(path), settings)?;
             let output = FitOutput {
                 record: fit.record(),
                 overlay: fit.overlay.clone(),
+                detection: None,
+            };
+            Ok(real(setup, Some(output)))
+        }
+        SceneInput::Photo {
+            image,
+            mask,
+            fit,
+            refine: photo_refine,
+        } => {
+            observer.say(PHOTO_ONLY_LINE);
+            let found = crate::detect::detect_photo(image, device)?;
+            for line in found.lines() {
+                observer.say(&line);
+            }
+            observer.say(&format!("detected in {:.2} s", found.seconds));
+            found.detection.require_both(image)?;
+            let fit_settings = fit_config(fit.as_deref())?;
+            let mut mask_bar = observer.refine();
+            let mut fit_bar = observer.fit();
+            let done = fit_photo(
+                image,
+                PhotoKeypoints::Detected(Box::new(found)),
+                None,
+                *mask,
+                hands,
+                prior,
+                &fit_settings,
+                Some((&config, photo_refine, mask_bar.as_mut())),
+                cache,
+                device,
+                fit_bar.as_mut(),
+            )
+            .context_with(|| {
+                format!(
+                    "fitting the hands detected in --image {} and refining them",
+                    image.display()
+                )
+            })?;
+            observer.say("");
+            for n in &done.fit.report.notes {
+                observer.say(&format!("note: {n}"));
+            }
+            for h in &done.fit.report.hands {
+                observer.say(&format!(
+                    "fitted the {} hand: residual {:.2} px mean ({:.2} max)",
+                    h.side, h.mean_residual_px, h.max_residual_px
+                ));
+            }
+            if let Some(r) = &done.refinement {
+                observer.say(&format!(
+                    "refined against the photo ({}): silhouette IoU {:.4} -> {:.4}",
+                    r.mask_source, r.iou_before, r.iou_after
+                ));
+            }
+            let settings = real_settings(config, refine.take());
+            let setup = keypoint_setup(&done, image, None, settings)?;
+            let output = FitOutput {
+                record: done.record(),
+                overlay: done.overlay.clone(),
+                detection: done.detection.clone(),
             };
             Ok(real(setup, Some(output)))
         }

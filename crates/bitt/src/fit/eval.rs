@@ -53,7 +53,14 @@ pub fn record_synthetic_fit(
         "report": fit.report,
         "scores_vs_truth": scores,
     });
-    Ok((scores, FitOutput { record, overlay }))
+    Ok((
+        scores,
+        FitOutput {
+            record,
+            overlay,
+            detection: None,
+        },
+    ))
 }
 
 /// The training view's true 2D joints with noise and dropped points.

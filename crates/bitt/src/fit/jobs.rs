@@ -1,6 +1,7 @@
 //! The job of `bitt fit-hands` (and of `train-scene --image IMG --keypoints FILE`): a photo
-//! and a keypoint file to both hands, optionally refined against a hand mask, and the output
-//! folder (`hands.json`, `fit.json`, `overlay.png`).
+//! and a keypoint file, or the hands the built-in detector found in the photo, to both
+//! hands, optionally refined against a hand mask (or the threshold rule), and the output
+//! folder (`hands.json`, `fit.json`, `overlay.png`; a detection's files too).
 
 use std::path::{Path, PathBuf};
 
@@ -12,6 +13,7 @@ use super::{FitConfig, FitObserver, KeypointFit, fit_keypoints};
 use crate::BittError;
 use crate::assets::HandAssets;
 use crate::config::TrainConfig;
+use crate::detect::{DetectionFiles, PhotoDetection};
 use crate::real::{HandSource, PriorSource, check_sources, load_models};
 use crate::refine::{
     HANDS_JSON, PhotoRefinement, RefineConfig, RefineObserver, outlines, overlay_scale, read_mask,
@@ -34,6 +36,16 @@ pub struct KeypointSource {
     /// The photo is a mirrored selfie: it is un-mirrored (flipped left-right) before the
     /// fit, with its keypoints and mask, so that each hand gets its own side's model.
     pub mirrored: bool,
+}
+
+/// Where a photo's keypoints come from.
+#[derive(Debug)]
+pub enum PhotoKeypoints<'a> {
+    /// A keypoint file.
+    File(&'a KeypointSource),
+    /// The hands the built-in detector found in the photo (`crate::detect::detect_photo`
+    /// of the same photo; it holds the photo's pixels). Both hands are needed.
+    Detected(Box<PhotoDetection>),
 }
 
 /// `fx,fy,cx,cy` (pixels) as four positive-focal numbers.
@@ -71,9 +83,11 @@ pub struct PhotoFit {
     pub fit: KeypointFit,
     /// The keypoints as fitted (un-mirrored with the photo when `mirrored`).
     pub keypoints: TwoHandKeypoints,
-    /// The silhouette refinement that followed, when a mask was given.
+    /// The silhouette refinement that followed, when one was asked for.
     pub refinement: Option<PhotoRefinement>,
-    /// The final hands (refined when a mask was given), at the photo's camera.
+    /// The detection the keypoints came from (no keypoint file given).
+    pub detection: Option<DetectionFiles>,
+    /// The final hands (refined when asked), at the photo's camera.
     pub hands: TwoHandScene,
     /// The hand models.
     pub models: HandPair,
@@ -103,8 +117,8 @@ impl PhotoFit {
         }
         if let Some(r) = &self.refinement {
             lines.push(format!(
-                "mask refinement: silhouette IoU {:.4} -> {:.4}",
-                r.iou_before, r.iou_after
+                "mask refinement ({}): silhouette IoU {:.4} -> {:.4}",
+                r.mask_source, r.iou_before, r.iou_after
             ));
         }
         lines.push(format!(
@@ -112,6 +126,15 @@ impl PhotoFit {
             report.seconds,
             out = out.display()
         ));
+        if self.detection.is_some() {
+            lines.push(format!(
+                "the detection: {out}/{}, {out}/{} and {out}/{}",
+                crate::detect::DETECTION_JSON,
+                crate::detect::KEYPOINTS_JSON,
+                crate::detect::DETECTION_OVERLAY,
+                out = out.display()
+            ));
+        }
         lines
     }
 
@@ -120,6 +143,7 @@ impl PhotoFit {
         serde_json::json!({
             "kind": "keypoint fit",
             "keypoint_format": self.keypoints.format,
+            "keypoints": if self.detection.is_some() { "detected in the photo" } else { "file" },
             "mirrored": self.mirrored,
             "camera": self.camera_source,
             "report": self.fit.report,
@@ -141,18 +165,21 @@ fn flip_planar(image: &[f32], channels: usize, [h, w]: [usize; 2]) -> Vec<f32> {
     out
 }
 
-/// Fits both hands to the keypoints of a photo (any size); with `mask` and `refine`, then
-/// refines them against the mask (the silhouette refinement of `bitt refine-hands`, at the
-/// BiTT crop size of 256 with `train`'s texture prior).
+/// Fits both hands to the keypoints of a photo (any size): a keypoint file's, or the
+/// detector's (which must have found both hands); with `refine`, then refines them against
+/// `mask`, or without one against the reference's threshold rule (mean RGB above
+/// [`crate::refine::MASK_THRESHOLD`]), as `bitt refine-hands` does, at the BiTT crop size of
+/// 256 with `train`'s texture prior.
 ///
 /// # Errors
-/// Missing or unreadable files, malformed keypoints (naming the file and field), a mask of
-/// the wrong size, bad intrinsics, no hand with enough keypoints; as [`fit_keypoints`] and
+/// Missing or unreadable files, malformed keypoints (naming the file and field), a
+/// detection without both hands (naming the photo and the missing hand), a mask of the wrong
+/// size, bad intrinsics, no hand with enough keypoints; as [`fit_keypoints`] and
 /// [`refine_photo_hands`].
 #[allow(clippy::too_many_arguments)]
 pub fn fit_photo(
     image: &Path,
-    keypoints: &KeypointSource,
+    keypoints: PhotoKeypoints<'_>,
     intrinsics: Option<[f64; 4]>,
     mask: Option<&Path>,
     hands: &HandSource,
@@ -164,21 +191,31 @@ pub fn fit_photo(
     observer: &mut dyn FitObserver,
 ) -> Result<PhotoFit, BittError> {
     check_sources(hands, prior)?;
-    crate::real::require_image(image)?;
-    let photo = bitt_texture::image_io::load_image(image)?;
-    let (w, h) = (photo.width, photo.height);
-    let options = KeypointOptions {
-        format: keypoints.format,
-        image_size: [w as u32, h as u32],
-        mirrored: false,
+    let (mut pixels, [h, w], mut points, mirrored, detection) = match keypoints {
+        PhotoKeypoints::File(source) => {
+            crate::real::require_image(image)?;
+            let photo = bitt_texture::image_io::load_image(image)?;
+            let (w, h) = (photo.width, photo.height);
+            let options = KeypointOptions {
+                format: source.format,
+                image_size: [w as u32, h as u32],
+                mirrored: false,
+            };
+            let points = read_keypoints(&source.path, &options)?;
+            (photo.data, [h, w], points, source.mirrored, None)
+        }
+        PhotoKeypoints::Detected(found) => {
+            found.detection.require_both(image)?;
+            let files = found.files()?;
+            let points = found.detection.keypoints();
+            (found.pixels, found.size, points, false, Some(files))
+        }
     };
-    let mut points = read_keypoints(&keypoints.path, &options)?;
-    let mut pixels = photo.data;
     let mut mask_pixels = match mask {
         Some(m) => Some((read_mask(m, [h, w])?, m.to_path_buf())),
         None => None,
     };
-    if keypoints.mirrored {
+    if mirrored {
         pixels = flip_planar(&pixels, 3, [h, w]);
         points = points.mirrored(w as f64);
         points.notes.push(
@@ -211,23 +248,21 @@ pub fn fit_photo(
     let both = fit.hands.left.is_some() && fit.hands.right.is_some();
     let mut notes = Vec::new();
     let refinement = match (refine, mask_pixels) {
-        (Some((train, refine_config, refine_observer)), Some(m)) if both => {
-            Some(refine_photo_hands(
-                image,
-                pixels.clone(),
-                &fit.hands,
-                Some(m),
-                models.clone(),
-                prior,
-                train,
-                crate::real::BITT_CROP_SIZE as usize,
-                refine_config,
-                cache,
-                device,
-                refine_observer,
-            )?)
-        }
-        (Some(_), Some(_)) => {
+        (Some((train, refine_config, refine_observer)), m) if both => Some(refine_photo_hands(
+            image,
+            pixels.clone(),
+            &fit.hands,
+            m,
+            models.clone(),
+            prior,
+            train,
+            crate::real::BITT_CROP_SIZE as usize,
+            refine_config,
+            cache,
+            device,
+            refine_observer,
+        )?),
+        (Some(_), _) => {
             notes.push(
                 "the mask refinement needs both hands and was skipped: only one was fitted".into(),
             );
@@ -246,10 +281,11 @@ pub fn fit_photo(
         fit,
         keypoints: points,
         refinement,
+        detection,
         hands: final_hands,
         models,
         image: pixels,
-        mirrored: keypoints.mirrored,
+        mirrored,
         camera_source,
         overlay,
     })
@@ -334,9 +370,10 @@ pub fn check_fit_out(out: &Path) -> Result<(), BittError> {
     crate::outputs::check_own_folder(out, FIT_JSON, "fit-hands")
 }
 
-/// Writes `hands.json`, `fit.json` and `overlay.png` into `out` (created if missing), and for
-/// a mirrored photo the un-mirrored `image.png` the hands are for. A folder that exists, is
-/// not empty and holds no `fit.json` is not ours and is refused.
+/// Writes `hands.json`, `fit.json` and `overlay.png` into `out` (created if missing), for
+/// a mirrored photo the un-mirrored `image.png` the hands are for, and for detected keypoints
+/// the detection's files (`detection.json`, `keypoints.json`, `detection_overlay.png`). A
+/// folder that exists, is not empty and holds no `fit.json` is not ours and is refused.
 ///
 /// # Errors
 /// A foreign folder, or a write failure (each file is written atomically).
@@ -359,6 +396,9 @@ pub fn write_fit_outputs(out: &Path, fit: &PhotoFit) -> Result<(), BittError> {
         oh,
         ow,
     )?;
+    if let Some(d) = &fit.detection {
+        d.write_into(out)?;
+    }
     // fit.json last: a folder with it is complete.
     crate::outputs::write_json(&out.join(FIT_JSON), &fit.record())
 }

@@ -45,6 +45,13 @@ pub enum RealSource {
         #[serde(default)]
         mirrored: bool,
     },
+    /// A photo alone: its hands were found by the built-in detector and fitted to its
+    /// keypoints (the run folder keeps the detection: `detection.json`, `keypoints.json`,
+    /// `detection_overlay.png`).
+    Detected {
+        /// The photo.
+        image: PathBuf,
+    },
     /// A scene of InterHand2.6M.
     InterHand {
         /// Dataset root.

@@ -204,26 +204,29 @@ fn single_view_setup(
 }
 
 /// A fresh real run from a photo whose hands were fitted to its keypoints
-/// ([`crate::fit::fit_photo`]; `fit.image` is the photo as fitted, `keypoints` the file).
+/// ([`crate::fit::fit_photo`]; `fit.image` is the photo as fitted): those of the file
+/// `keypoints`, or with `None` those the built-in detector found in the photo.
 ///
 /// # Errors
 /// A fit without both hands, hands outside the image; as [`real_trainer`].
 pub fn keypoint_setup(
     fit: &crate::fit::PhotoFit,
     image: &Path,
-    keypoints: &Path,
+    keypoints: Option<&Path>,
     settings: RealRunSettings<'_>,
 ) -> Result<RealSetup, BittError> {
+    // What the keypoints' problems are named by: their file, else the photo.
+    let named = keypoints.unwrap_or(image);
     for side in Side::BOTH {
         if fit.hands.hand(side).is_none() {
             return Err(BittError::Invalid(format!(
                 "{}: the {side} hand has too few keypoints to be fitted; BiTT needs both hands",
-                keypoints.display()
+                named.display()
             )));
         }
     }
     let models = fit.models.clone();
-    check_hand_placement(&fit.hands, &models, keypoints)?;
+    check_hand_placement(&fit.hands, &models, named)?;
     let view = prepare_view(
         "train",
         image,
@@ -232,10 +235,15 @@ pub fn keypoint_setup(
         &models,
         settings.config.nets.image_size,
     )?;
-    let source = RealSource::Keypoints {
-        image: absolute(image),
-        keypoints: absolute(keypoints),
-        mirrored: fit.mirrored,
+    let source = match keypoints {
+        Some(keypoints) => RealSource::Keypoints {
+            image: absolute(image),
+            keypoints: absolute(keypoints),
+            mirrored: fit.mirrored,
+        },
+        None => RealSource::Detected {
+            image: absolute(image),
+        },
     };
     single_view_setup(view, source, image, models, settings)
 }

@@ -44,6 +44,7 @@ use crate::metrics::mask_iou;
 use crate::optim::Adam;
 use crate::pipeline::point_light;
 
+pub use crate::outputs::overlay_scale;
 pub use jobs::{
     HANDS_JSON, PhotoRefinement, SceneRefinement, check_refine_out, read_mask, refine_photo,
     refine_photo_hands, refine_scene, write_refine_outputs,
@@ -1267,11 +1268,6 @@ pub fn vertex_error_px(
     b: &TwoHandScene,
 ) -> Result<(f64, f64), BittError> {
     Ok(a.projected_distance_px(b, models)?)
-}
-
-/// The overlay's enlargement for an image `width` pixels wide: drawn at least 512 wide.
-pub fn overlay_scale(width: usize) -> usize {
-    512usize.div_ceil(width.max(1)).clamp(1, 8)
 }
 
 #[cfg(test)]

@@ -1,0 +1,803 @@
+//! The two-hand search: MediaPipe's palm → landmark pipeline finds one of two interlocked
+//! hands; this search keeps looking until it has one hand of each side or has run out of
+//! places to look, and says what each stage found (`docs/detection.md`).
+//!
+//! Stages, each run only while a hand is missing:
+//! 1. **palms**: the palm detector on the letterboxed photo and on overlapping crops of it
+//!    (a hand that is small in the photo is larger in a crop), every palm scoring at least
+//!    [`SearchConfig::min_palm_score`];
+//! 2. **landmarks**: the landmark model on each palm's hand rectangle, then again on the
+//!    rectangle its own landmarks give (MediaPipe's tracking step) until it settles;
+//! 3. **masked**: with the hands found so far painted black, the palm detector again: a hand
+//!    hidden behind a more confident one becomes the best palm;
+//! 4. **ring**: hand rectangles around each found hand (the other hand of a pair touches it),
+//!    at several rotations and sizes, scored by the landmark model's presence.
+//!
+//! Candidates that lie on the same hand are merged; the two hands are then the pair of
+//! distinct hands that maximises presence times the probability of each one's side, with
+//! the two sides different.
+
+use std::time::Instant;
+
+use bitt_mesh::Side;
+use bitt_mesh::keypoints::{Keypoint, KeypointFormat, TwoHandKeypoints};
+use image::RgbImage;
+
+use crate::crop::{Rect, normalize_angle, rotation_to_up};
+use crate::detector::{HandDetector, HandLandmarks};
+use crate::palm::{Palm, letterbox, weighted_nms};
+use crate::{DetectError, NUM_LANDMARKS};
+
+/// Settings of the search (defaults measured on the demo frames, `docs/detection.md`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SearchConfig {
+    /// Palms scoring below this are dropped (MediaPipe's default is 0.5; interlocked hands
+    /// score far lower).
+    pub min_palm_score: f64,
+    /// A hand needs at least this landmark presence (MediaPipe's default).
+    pub min_presence: f64,
+    /// Tracking steps of the landmark model per candidate (rectangle from landmarks, again).
+    pub tracking_steps: usize,
+    /// Run the masked second palm pass.
+    pub masked_pass: bool,
+    /// Run the ring of hand rectangles around a found hand (off by default: on the demo
+    /// frames it costs 2.4 s and finds no hand the other stages miss; `docs/detection.md`).
+    pub ring: bool,
+    /// Rotations of the ring's rectangles (degrees, relative to the found hand's).
+    pub ring_rotations: Vec<f64>,
+    /// The smallest hand (diagonal of its landmarks' box) as a fraction of the photo's long
+    /// side; smaller candidates are specks of light, not hands. Never below 16 px.
+    pub min_hand_size: f64,
+    /// The most palms (best first) whose hands the landmark model looks at, per stage.
+    pub max_palms: usize,
+    /// When exactly one hand is found, place the other one by hypothesis (stage
+    /// `hypothesis`, presence 0): interlocked, the mirror image of the found hand about its
+    /// own wrist-to-middle-finger axis, shifted along that axis by
+    /// [`SearchConfig::hypothesis_shift`] palm lengths. Its keypoints are a starting point for
+    /// the fit and the refinement against the photo, not a detection.
+    pub hypothesis: bool,
+    /// See [`SearchConfig::hypothesis`].
+    pub hypothesis_shift: f64,
+    /// The hypothesis' size relative to the found hand (about its wrist): the found hand's
+    /// wrist landmark tends to sit on the forearm when the other hand hides the palm.
+    pub hypothesis_scale: f64,
+}
+
+impl Default for SearchConfig {
+    fn default() -> Self {
+        SearchConfig {
+            min_palm_score: 0.1,
+            min_presence: 0.5,
+            tracking_steps: 2,
+            masked_pass: true,
+            ring: false,
+            ring_rotations: vec![0.0, 45.0, 90.0, 135.0, 180.0, 225.0, 270.0, 315.0],
+            min_hand_size: 0.08,
+            max_palms: 8,
+            hypothesis: true,
+            hypothesis_shift: 0.8,
+            hypothesis_scale: 0.75,
+        }
+    }
+}
+
+/// One hand the search settled on.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct DetectedHand {
+    /// The hand as it appears in the photo (the model that fits it).
+    pub side: Side,
+    /// 21 points `[x, y, z]` in the project's pixel convention (centre of the top-left pixel
+    /// at `(0, 0)`), OpenPose order.
+    pub points: Vec<[f64; 3]>,
+    /// The landmark model's presence score.
+    pub presence: f64,
+    /// The probability the landmark model gives to this hand's side.
+    pub side_probability: f64,
+    /// The palm detector's score of the palm it started from (`None` for the ring stage).
+    pub palm_score: Option<f64>,
+    /// The stage that found it: `palms`, `masked` or `ring`.
+    pub stage: String,
+    /// The crop the final landmarks came from.
+    pub rect: Rect,
+}
+
+/// What one stage of the search did.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct StageReport {
+    /// `palms`, `masked` or `ring`.
+    pub stage: String,
+    /// Palm detector inputs run.
+    pub palm_runs: usize,
+    /// Landmark model inputs run.
+    pub landmark_runs: usize,
+    /// Distinct hands with enough presence after the stage.
+    pub hands: usize,
+    /// Seconds.
+    pub seconds: f64,
+}
+
+/// The search's result: up to one hand per side, and what it took.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TwoHandDetection {
+    /// `[width, height]` of the photo.
+    pub image_size: [u32; 2],
+    /// The left hand as it appears in the photo.
+    pub left: Option<DetectedHand>,
+    /// The right hand.
+    pub right: Option<DetectedHand>,
+    /// The stages run, in order.
+    pub stages: Vec<StageReport>,
+    /// The highest presence of any candidate (for the "no hand" message).
+    pub best_presence: f64,
+    /// The settings used.
+    pub config: SearchConfig,
+}
+
+/// A landmark candidate with where it came from.
+#[derive(Debug, Clone)]
+struct Candidate {
+    hand: HandLandmarks,
+    /// The side of the crop the candidate was first found in.
+    first_crop: f64,
+    palm_score: Option<f64>,
+    stage: &'static str,
+}
+
+impl Candidate {
+    /// Hand size: the diagonal of the landmarks' box.
+    fn size(&self) -> f64 {
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for p in &self.hand.points {
+            lo = [lo[0].min(p[0]), lo[1].min(p[1])];
+            hi = [hi[0].max(p[0]), hi[1].max(p[1])];
+        }
+        ((hi[0] - lo[0]).powi(2) + (hi[1] - lo[1]).powi(2)).sqrt()
+    }
+
+    /// Palm length: wrist to the middle finger's base.
+    fn palm_length(&self) -> f64 {
+        let p = &self.hand.points;
+        ((p[0][0] - p[9][0]).powi(2) + (p[0][1] - p[9][1]).powi(2)).sqrt()
+    }
+
+    /// Whether the landmarks look like a hand rather than a collapsed blob: they span at
+    /// least a fifth of the crop they were found in (a hand fills about half of its crop)
+    /// and [`SearchConfig::min_hand_size`] of the photo's long side.
+    fn plausible(&self, min_size: f64) -> bool {
+        let size = self.size();
+        size >= 0.2 * self.first_crop && size >= min_size
+    }
+
+    /// Whether two candidates cannot be the two hands of a pair: their wrists are within a
+    /// third of a palm length and their points within half of one on average (the landmark
+    /// model sometimes calls the same hand left in one crop and right in another).
+    fn overlaps(&self, other: &Candidate) -> bool {
+        let palm = self.palm_length().max(other.palm_length()).max(1.0);
+        let (a, b) = (&self.hand.points, &other.hand.points);
+        let wrist = ((a[0][0] - b[0][0]).powi(2) + (a[0][1] - b[0][1]).powi(2)).sqrt();
+        let mean: f64 = a
+            .iter()
+            .zip(b)
+            .map(|(p, q)| ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt())
+            .sum::<f64>()
+            / NUM_LANDMARKS as f64;
+        wrist < palm / 3.0 && mean < palm * 0.5
+    }
+
+    /// Whether two candidates lie on the same hand: their points' mean distance is under
+    /// half a palm length, and the landmark model does not say confidently that they are
+    /// hands of different sides (two interlocked hands overlap that much); or the points
+    /// nearly coincide.
+    fn same_hand(&self, other: &Candidate) -> bool {
+        let palm = self.palm_length().max(other.palm_length()).max(1.0);
+        let mean: f64 = self
+            .hand
+            .points
+            .iter()
+            .zip(&other.hand.points)
+            .map(|(a, b)| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt())
+            .sum::<f64>()
+            / NUM_LANDMARKS as f64;
+        let confident = |r: f64| !(0.3..=0.7).contains(&r);
+        let opposite = confident(self.hand.right)
+            && confident(other.hand.right)
+            && (self.hand.right > 0.5) != (other.hand.right > 0.5);
+        mean < palm * 0.15 || (!opposite && mean < palm * 0.5)
+    }
+}
+
+/// The hand rectangle from landmarks (MediaPipe's `hand_landmark_landmarks_to_roi`: rotation
+/// from the wrist towards the middle of the index/ring and middle finger bases, the box in
+/// that rotation, scale 2.0, shift_y -0.1).
+pub fn rect_from_landmarks(points: &[[f64; 3]]) -> Rect {
+    let p = |i: usize| [points[i][0], points[i][1]];
+    let mid = |a: [f64; 2], b: [f64; 2]| [(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0];
+    let base = mid(mid(p(5), p(13)), p(9));
+    let rotation = rotation_to_up(p(0), base);
+    let pts: Vec<[f64; 2]> = points.iter().map(|q| [q[0], q[1]]).collect();
+    Rect::bounding(&pts, rotation).transformed(2.0, [0.0, -0.1])
+}
+
+/// Overlapping views of the photo for the palm detector: the letterboxed photo, and for a
+/// photo at least 512 px on its long side (where a hand may be small at the detector's 192
+/// px), a 3 x 3 grid of square crops of half the long side.
+fn palm_views(width: u32, height: u32) -> Vec<Rect> {
+    let mut views = vec![letterbox(width, height)];
+    let long = width.max(height) as f64;
+    if long >= 512.0 {
+        let side = long / 2.0;
+        for j in 0..3 {
+            for i in 0..3 {
+                let cx = side / 2.0 + (width as f64 - side).max(0.0) * i as f64 / 2.0;
+                let cy = side / 2.0 + (height as f64 - side).max(0.0) * j as f64 / 2.0;
+                views.push(Rect {
+                    center: [cx, cy],
+                    size: [side, side],
+                    rotation: 0.0,
+                });
+            }
+        }
+    }
+    views
+}
+
+/// Searches `image` for two hands with `detector`.
+///
+/// Returns whatever it found (zero, one or two hands); [`TwoHandDetection::require_both`]
+/// turns a missing hand into the error a user should see.
+///
+/// # Errors
+/// An image too small to hold a hand (under 16 px), or a failed readback.
+pub fn detect_hands(
+    detector: &HandDetector,
+    image: &RgbImage,
+    config: &SearchConfig,
+) -> Result<TwoHandDetection, DetectError> {
+    let (w, h) = image.dimensions();
+    if w < 16 || h < 16 {
+        return Err(DetectError::Image {
+            image: "the photo".into(),
+            detail: format!("{w}x{h} pixels is too small to hold a hand (at least 16x16)"),
+        });
+    }
+    let long = w.max(h) as f64;
+    let mut candidates: Vec<Candidate> = Vec::new();
+    let mut stages = Vec::new();
+
+    // 1. palms, 2. landmarks
+    let t = Instant::now();
+    let views = palm_views(w, h);
+    let palms = merge_palms(
+        detector.palms(image, &views, config.min_palm_score)?,
+        config,
+        long,
+    );
+    let mut runs = 0;
+    candidates.extend(track(detector, image, &palms, "palms", config, &mut runs)?);
+    stages.push(report(
+        long,
+        "palms",
+        views.len(),
+        runs,
+        &candidates,
+        config,
+        t,
+    ));
+
+    // 3. masked
+    if config.masked_pass && pick(&candidates, config, long).missing() {
+        let t = Instant::now();
+        let mut masked = image.clone();
+        for c in candidates
+            .iter()
+            .filter(|c| c.hand.presence >= config.min_presence)
+        {
+            paint_hand(&mut masked, &c.hand.points);
+        }
+        let palms = merge_palms(
+            detector.palms(&masked, &views, config.min_palm_score)?,
+            config,
+            long,
+        );
+        let mut runs = 0;
+        // Landmarks on the original photo: the mask only steers where to look.
+        candidates.extend(track(detector, image, &palms, "masked", config, &mut runs)?);
+        stages.push(report(
+            long,
+            "masked",
+            views.len(),
+            runs,
+            &candidates,
+            config,
+            t,
+        ));
+    }
+
+    // 4. ring
+    if config.ring && pick(&candidates, config, long).missing() {
+        let t = Instant::now();
+        let found: Vec<Candidate> = distinct(&candidates, config, long);
+        let mut rects = Vec::new();
+        for c in &found {
+            let r = rect_from_landmarks(&c.hand.points);
+            let step = r.size[0] * 0.25;
+            for k in 0..5 {
+                let a = r.rotation + k as f64 * std::f64::consts::FRAC_PI_2;
+                let d = if k == 4 { 0.0 } else { step };
+                for rot in &config.ring_rotations {
+                    rects.push(Rect {
+                        center: [r.center[0] + d * a.cos(), r.center[1] + d * a.sin()],
+                        size: r.size,
+                        rotation: normalize_angle(r.rotation + rot.to_radians()),
+                    });
+                }
+            }
+        }
+        let mut runs = rects.len();
+        let first = detector.landmarks(image, &rects)?;
+        let seeds: Vec<Candidate> = first
+            .into_iter()
+            .filter(|l| l.presence >= config.min_presence * 0.5)
+            .map(|hand| Candidate {
+                first_crop: hand.rect.size[0],
+                hand,
+                palm_score: None,
+                stage: "ring",
+            })
+            .collect();
+        candidates.extend(refine(detector, image, seeds, config, &mut runs)?);
+        stages.push(report(long, "ring", 0, runs, &candidates, config, t));
+    }
+
+    let best_presence = candidates
+        .iter()
+        .map(|c| c.hand.presence)
+        .fold(0.0, f64::max);
+    let mut chosen = pick(&candidates, config, long);
+    if config.hypothesis {
+        let t = Instant::now();
+        let placed = match (&chosen.left, &chosen.right) {
+            (Some(found), None) => Some((false, found)),
+            (None, Some(found)) => Some((true, found)),
+            _ => None,
+        };
+        if let Some((left_missing, found)) = placed {
+            let other = hypothesis(found, config.hypothesis_shift, config.hypothesis_scale);
+            if left_missing {
+                chosen.left = Some(other);
+            } else {
+                chosen.right = Some(other);
+            }
+            stages.push(StageReport {
+                stage: "hypothesis".into(),
+                palm_runs: 0,
+                landmark_runs: 0,
+                hands: 2,
+                seconds: t.elapsed().as_secs_f64(),
+            });
+        }
+    }
+    let to_hand = |c: &Candidate, side: Side| {
+        let p_right = c.hand.right;
+        DetectedHand {
+            side,
+            points: c
+                .hand
+                .points
+                .iter()
+                .map(|p| [p[0] - 0.5, p[1] - 0.5, p[2]])
+                .collect(),
+            presence: c.hand.presence,
+            side_probability: if side == Side::Right {
+                p_right
+            } else {
+                1.0 - p_right
+            },
+            palm_score: c.palm_score,
+            stage: c.stage.to_string(),
+            rect: c.hand.rect,
+        }
+    };
+    Ok(TwoHandDetection {
+        image_size: [w, h],
+        left: chosen.left.map(|c| to_hand(&c, Side::Left)),
+        right: chosen.right.map(|c| to_hand(&c, Side::Right)),
+        stages,
+        best_presence,
+        config: config.clone(),
+    })
+}
+
+/// The other hand of an interlocked pair, placed from the found one (see
+/// [`SearchConfig::hypothesis`]): every point mirrored about the line from the wrist to the
+/// middle finger's base, scaled by `k` about the wrist, then shifted along that line by
+/// `shift` palm lengths. Its handedness is the
+/// opposite of the found hand's, its presence 0.
+fn hypothesis(found: &Candidate, shift: f64, k: f64) -> Candidate {
+    let p = &found.hand.points;
+    let (o, m) = ([p[0][0], p[0][1]], [p[9][0], p[9][1]]);
+    let len = ((m[0] - o[0]).powi(2) + (m[1] - o[1]).powi(2))
+        .sqrt()
+        .max(1e-9);
+    let d = [(m[0] - o[0]) / len, (m[1] - o[1]) / len];
+    let points = p
+        .iter()
+        .map(|q| {
+            let v = [q[0] - o[0], q[1] - o[1]];
+            let along = v[0] * d[0] + v[1] * d[1];
+            let across = [v[0] - along * d[0], v[1] - along * d[1]];
+            [
+                o[0] + (k * along + shift * len) * d[0] - k * across[0],
+                o[1] + (k * along + shift * len) * d[1] - k * across[1],
+                q[2],
+            ]
+        })
+        .collect();
+    Candidate {
+        first_crop: found.first_crop,
+        hand: HandLandmarks {
+            rect: found.hand.rect,
+            points,
+            presence: 0.0,
+            right: 1.0 - found.hand.right,
+        },
+        palm_score: None,
+        stage: "hypothesis",
+    }
+}
+
+/// Palms of all views merged (the same palm seen in two views counts once), without boxes
+/// too small to hold a hand of [`SearchConfig::min_hand_size`], best first, at most
+/// [`SearchConfig::max_palms`].
+fn merge_palms(per_view: Vec<Vec<Palm>>, config: &SearchConfig, long: f64) -> Vec<Palm> {
+    let min_box = (config.min_hand_size * long).max(16.0) / 2.0;
+    let mut palms = weighted_nms(per_view.into_iter().flatten().collect(), 0.3);
+    palms.retain(|p| p.size[0].max(p.size[1]) >= min_box);
+    palms.truncate(config.max_palms);
+    palms
+}
+
+/// The landmark model on each palm's hand rectangle, then the tracking steps.
+fn track(
+    detector: &HandDetector,
+    image: &RgbImage,
+    palms: &[Palm],
+    stage: &'static str,
+    config: &SearchConfig,
+    runs: &mut usize,
+) -> Result<Vec<Candidate>, DetectError> {
+    let rects: Vec<Rect> = palms.iter().map(Palm::hand_rect).collect();
+    *runs += rects.len();
+    let first = detector.landmarks(image, &rects)?;
+    let seeds = first
+        .into_iter()
+        .zip(palms)
+        .map(|(hand, p)| Candidate {
+            first_crop: hand.rect.size[0],
+            hand,
+            palm_score: Some(p.score),
+            stage,
+        })
+        .collect();
+    refine(detector, image, seeds, config, runs)
+}
+
+/// MediaPipe's tracking step, [`SearchConfig::tracking_steps`] times: the rectangle from a
+/// candidate's landmarks, the landmark model again; each candidate keeps whichever of its
+/// versions has the highest presence.
+fn refine(
+    detector: &HandDetector,
+    image: &RgbImage,
+    mut cands: Vec<Candidate>,
+    config: &SearchConfig,
+    runs: &mut usize,
+) -> Result<Vec<Candidate>, DetectError> {
+    for _ in 0..config.tracking_steps {
+        let rects: Vec<Rect> = cands
+            .iter()
+            .map(|c| rect_from_landmarks(&c.hand.points))
+            .collect();
+        *runs += rects.len();
+        let next = detector.landmarks(image, &rects)?;
+        for (c, n) in cands.iter_mut().zip(next) {
+            if n.presence >= c.hand.presence * 0.9 {
+                c.hand = n;
+            }
+        }
+    }
+    Ok(cands)
+}
+
+fn report(
+    long: f64,
+    stage: &str,
+    palm_runs: usize,
+    landmark_runs: usize,
+    candidates: &[Candidate],
+    config: &SearchConfig,
+    t: Instant,
+) -> StageReport {
+    StageReport {
+        stage: stage.to_string(),
+        palm_runs,
+        landmark_runs,
+        hands: distinct(candidates, config, long).len(),
+        seconds: t.elapsed().as_secs_f64(),
+    }
+}
+
+/// The best candidate of each distinct hand with enough presence, best first.
+fn distinct(candidates: &[Candidate], config: &SearchConfig, long_side: f64) -> Vec<Candidate> {
+    let min_size = (config.min_hand_size * long_side).max(16.0);
+    let mut sorted: Vec<&Candidate> = candidates
+        .iter()
+        .filter(|c| c.hand.presence >= config.min_presence && c.plausible(min_size))
+        .collect();
+    sorted.sort_by(|a, b| b.hand.presence.total_cmp(&a.hand.presence));
+    let mut out: Vec<Candidate> = Vec::new();
+    for c in sorted {
+        if !out.iter().any(|o| o.same_hand(c)) {
+            out.push(c.clone());
+        }
+    }
+    out
+}
+
+struct Chosen {
+    left: Option<Candidate>,
+    right: Option<Candidate>,
+}
+
+impl Chosen {
+    fn missing(&self) -> bool {
+        self.left.is_none() || self.right.is_none()
+    }
+}
+
+/// The pair of distinct hands (one left, one right) with the highest
+/// `presence · P(side)` summed; a single hand when there is only one.
+fn pick(candidates: &[Candidate], config: &SearchConfig, long: f64) -> Chosen {
+    let hands = distinct(candidates, config, long);
+    let score = |c: &Candidate, side: Side| {
+        c.hand.presence
+            * if side == Side::Right {
+                c.hand.right
+            } else {
+                1.0 - c.hand.right
+            }
+    };
+    let mut best: Option<(f64, usize, usize)> = None;
+    for (i, a) in hands.iter().enumerate() {
+        for (j, b) in hands.iter().enumerate() {
+            if i == j || a.overlaps(b) {
+                continue;
+            }
+            // a right, b left
+            let s = score(a, Side::Right) + score(b, Side::Left);
+            if best.is_none_or(|(bs, _, _)| s > bs) {
+                best = Some((s, i, j));
+            }
+        }
+    }
+    match best {
+        Some((_, i, j)) => Chosen {
+            right: Some(hands[i].clone()),
+            left: Some(hands[j].clone()),
+        },
+        None => match hands.first() {
+            Some(c) if c.hand.right >= 0.5 => Chosen {
+                left: None,
+                right: Some(c.clone()),
+            },
+            Some(c) => Chosen {
+                left: Some(c.clone()),
+                right: None,
+            },
+            None => Chosen {
+                left: None,
+                right: None,
+            },
+        },
+    }
+}
+
+/// Paints the convex hull of a hand's landmarks, grown by a quarter of the hand's size,
+/// black.
+fn paint_hand(image: &mut RgbImage, points: &[[f64; 3]]) {
+    let pts: Vec<[f64; 2]> = points.iter().map(|p| [p[0], p[1]]).collect();
+    let hull = convex_hull(&pts);
+    if hull.len() < 3 {
+        return;
+    }
+    let c = Candidate {
+        first_crop: 0.0,
+        hand: HandLandmarks {
+            rect: Rect {
+                center: [0.0; 2],
+                size: [0.0; 2],
+                rotation: 0.0,
+            },
+            points: points.to_vec(),
+            presence: 0.0,
+            right: 0.0,
+        },
+        palm_score: None,
+        stage: "",
+    };
+    let grow = c.size() * 0.12;
+    let (w, h) = image.dimensions();
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in &hull {
+        lo = [lo[0].min(p[0]), lo[1].min(p[1])];
+        hi = [hi[0].max(p[0]), hi[1].max(p[1])];
+    }
+    let x0 = (lo[0] - grow).floor().max(0.0) as u32;
+    let y0 = (lo[1] - grow).floor().max(0.0) as u32;
+    let x1 = ((hi[0] + grow).ceil().max(0.0) as u32).min(w);
+    let y1 = ((hi[1] + grow).ceil().max(0.0) as u32).min(h);
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let p = [x as f64 + 0.5, y as f64 + 0.5];
+            if distance_outside_hull(&hull, p) <= grow {
+                image.put_pixel(x, y, image::Rgb([0, 0, 0]));
+            }
+        }
+    }
+}
+
+/// Andrew's monotone chain, counter-clockwise in a y-down frame's math orientation.
+fn convex_hull(points: &[[f64; 2]]) -> Vec<[f64; 2]> {
+    let mut p: Vec<[f64; 2]> = points.to_vec();
+    p.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    p.dedup();
+    if p.len() < 3 {
+        return p;
+    }
+    let cross = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| {
+        (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+    };
+    let mut hull: Vec<[f64; 2]> = Vec::new();
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &[f64; 2]>> = if pass == 0 {
+            Box::new(p.iter())
+        } else {
+            Box::new(p.iter().rev())
+        };
+        for &q in iter {
+            while hull.len() >= start + 2
+                && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0
+            {
+                hull.pop();
+            }
+            hull.push(q);
+        }
+        hull.pop();
+    }
+    hull
+}
+
+/// 0 inside the convex polygon `hull` (counter-clockwise), else the distance to it.
+fn distance_outside_hull(hull: &[[f64; 2]], p: [f64; 2]) -> f64 {
+    let n = hull.len();
+    let mut inside = true;
+    let mut best = f64::INFINITY;
+    for i in 0..n {
+        let a = hull[i];
+        let b = hull[(i + 1) % n];
+        let cross = (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]);
+        if cross < 0.0 {
+            inside = false;
+        }
+        let ab = [b[0] - a[0], b[1] - a[1]];
+        let len2 = (ab[0] * ab[0] + ab[1] * ab[1]).max(1e-12);
+        let t = (((p[0] - a[0]) * ab[0] + (p[1] - a[1]) * ab[1]) / len2).clamp(0.0, 1.0);
+        let q = [a[0] + t * ab[0], a[1] + t * ab[1]];
+        best = best.min(((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt());
+    }
+    if inside { 0.0 } else { best }
+}
+
+impl TwoHandDetection {
+    /// The hand of `side`, if found.
+    pub fn hand(&self, side: Side) -> Option<&DetectedHand> {
+        match side {
+            Side::Left => self.left.as_ref(),
+            Side::Right => self.right.as_ref(),
+        }
+    }
+
+    /// The found hands as keypoints (plain format; every point confidence = the hand's
+    /// presence), with a note per hand saying what found it.
+    pub fn keypoints(&self) -> TwoHandKeypoints {
+        let hand = |h: &Option<DetectedHand>| {
+            h.as_ref().map(|h| {
+                h.points
+                    .iter()
+                    .map(|p| Keypoint {
+                        x: p[0],
+                        y: p[1],
+                        confidence: h.presence.clamp(1e-3, 1.0),
+                    })
+                    .collect::<Vec<_>>()
+            })
+        };
+        let mut notes = Vec::new();
+        for side in [Side::Left, Side::Right] {
+            match self.hand(side) {
+                Some(h) if h.stage == "hypothesis" => notes.push(format!(
+                    "the {} hand was not detected: it is placed by hypothesis, interlocked with the {} hand (check the overlay; give --keypoints if it is wrong)",
+                    side.as_str(),
+                    side.mirrored().as_str()
+                )),
+                Some(h) => notes.push(format!(
+                    "{} hand detected by the {} stage (presence {:.2}, {} with probability {:.2})",
+                    side.as_str(),
+                    h.stage,
+                    h.presence,
+                    side.as_str(),
+                    h.side_probability
+                )),
+                None => notes.push(format!("no {} hand detected", side.as_str())),
+            }
+        }
+        TwoHandKeypoints {
+            left: hand(&self.left),
+            right: hand(&self.right),
+            format: KeypointFormat::Plain,
+            notes,
+        }
+    }
+
+    /// The side whose hand was placed by hypothesis rather than detected, if any.
+    pub fn hypothesized(&self) -> Option<Side> {
+        Side::BOTH
+            .into_iter()
+            .find(|&s| self.hand(s).is_some_and(|h| h.stage == "hypothesis"))
+    }
+
+    /// `Ok` when both hands were found; otherwise the error a user should see, naming
+    /// `image` (no hand, or which one of the two is missing).
+    ///
+    /// # Errors
+    /// [`DetectError::NoHand`] or [`DetectError::OneHand`].
+    pub fn require_both(&self, image: &std::path::Path) -> Result<(), DetectError> {
+        match (&self.left, &self.right) {
+            (Some(_), Some(_)) => Ok(()),
+            (None, None) => Err(DetectError::NoHand {
+                image: image.to_path_buf(),
+                best_presence: self.best_presence,
+            }),
+            (Some(h), None) | (None, Some(h)) => Err(DetectError::OneHand {
+                image: image.to_path_buf(),
+                found: h.side.as_str(),
+                missing: h.side.mirrored().as_str(),
+                presence: h.presence,
+            }),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hull_and_distance() {
+        let hull = convex_hull(&[[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0], [2.0, 2.0]]);
+        assert_eq!(hull.len(), 4);
+        assert_eq!(distance_outside_hull(&hull, [2.0, 2.0]), 0.0);
+        assert!((distance_outside_hull(&hull, [6.0, 2.0]) - 2.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn views_cover_the_photo() {
+        assert_eq!(palm_views(100, 80).len(), 1);
+        assert_eq!(palm_views(256, 256).len(), 1);
+        let v = palm_views(1920, 1080);
+        assert_eq!(v.len(), 10);
+        assert!(v.iter().all(|r| r.center[0] - r.size[0] / 2.0 >= -1e-9));
+        let last = v.last().unwrap();
+        assert!((last.center[0] + last.size[0] / 2.0 - 1920.0).abs() < 1e-9);
+    }
+}
