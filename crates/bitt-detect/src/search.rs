@@ -534,13 +534,25 @@ fn distinct(candidates: &[Candidate], config: &SearchConfig, long_side: f64) -> 
         .filter(|c| c.hand.presence >= config.min_presence && c.plausible(min_size))
         .collect();
     sorted.sort_by(|a, b| b.hand.presence.total_cmp(&a.hand.presence));
-    let mut out: Vec<Candidate> = Vec::new();
+    // Each distinct hand keeps its best candidate's points; its side is the presence-weighted
+    // vote of every candidate merged into it (the landmark model's handedness wavers between
+    // crops of one hand, and one crop's vote is a coin toss where another's is clear).
+    let mut out: Vec<(Candidate, f64, f64)> = Vec::new();
     for c in sorted {
-        if !out.iter().any(|o| o.same_hand(c)) {
-            out.push(c.clone());
+        match out.iter_mut().find(|(o, _, _)| o.same_hand(c)) {
+            Some((_, votes, weight)) => {
+                *votes += c.hand.presence * c.hand.right;
+                *weight += c.hand.presence;
+            }
+            None => out.push((c.clone(), c.hand.presence * c.hand.right, c.hand.presence)),
         }
     }
-    out
+    out.into_iter()
+        .map(|(mut c, votes, weight)| {
+            c.hand.right = votes / weight;
+            c
+        })
+        .collect()
 }
 
 struct Chosen {
@@ -788,6 +800,53 @@ mod tests {
         assert_eq!(hull.len(), 4);
         assert_eq!(distance_outside_hull(&hull, [2.0, 2.0]), 0.0);
         assert!((distance_outside_hull(&hull, [6.0, 2.0]) - 2.0).abs() < 1e-12);
+    }
+
+    /// A hand-shaped candidate: 21 points spread over `size` pixels from `origin`.
+    fn candidate(origin: [f64; 2], size: f64, presence: f64, right: f64) -> Candidate {
+        let points = (0..NUM_LANDMARKS)
+            .map(|i| {
+                let (finger, joint) = ((i / 4) as f64, (i % 4) as f64);
+                [
+                    origin[0] + size * 0.2 * finger,
+                    origin[1] - size * 0.25 * joint,
+                    0.0,
+                ]
+            })
+            .collect();
+        Candidate {
+            hand: HandLandmarks {
+                rect: Rect::bounding(&[origin], 0.0),
+                points,
+                presence,
+                right,
+            },
+            first_crop: size * 2.0,
+            palm_score: Some(0.5),
+            stage: "palms",
+        }
+    }
+
+    #[test]
+    fn a_merged_hand_takes_its_side_from_every_crop() {
+        let config = SearchConfig::default();
+        // Two crops of one hand (3 px apart): the better one unsure (0.45), the other sure
+        // (0.76): one right hand, its side the presence-weighted vote.
+        let a = candidate([100.0, 200.0], 100.0, 0.99, 0.45);
+        let b = candidate([103.0, 200.0], 100.0, 0.98, 0.76);
+        let far = candidate([400.0, 200.0], 100.0, 0.9, 0.1);
+        let hands = distinct(&[a.clone(), b, far], &config, 512.0);
+        assert_eq!(hands.len(), 2);
+        assert_eq!(
+            hands[0].hand.points, a.hand.points,
+            "the best crop's landmarks"
+        );
+        let vote = (0.99 * 0.45 + 0.98 * 0.76) / (0.99 + 0.98);
+        assert!((hands[0].hand.right - vote).abs() < 1e-12);
+        assert!((hands[1].hand.right - 0.1).abs() < 1e-12);
+        let chosen = pick(&hands, &config, 512.0);
+        assert_eq!(chosen.right.unwrap().hand.points, a.hand.points);
+        assert!(chosen.left.is_some());
     }
 
     #[test]

@@ -171,11 +171,11 @@ fn demo_frames_give_both_hands_of_the_right_sides() {
         assert_eq!(found.len(), want_detected, "{name}: detected {found:?}");
         for v in variants(&img) {
             let what = format!("{name} {}", v.name);
-            let d = detect_hands(&det, &v.image, &config).expect("search");
             let t = truth.map(|(side, [a, b])| {
                 let side = if v.mirrored { side.mirrored() } else { side };
                 (side, [(v.map)(a), (v.map)(b)])
             });
+            let d = detect_hands(&det, &v.image, &config).expect("search");
             match check_sides(&d, &t, &what) {
                 Ok(found) if !found.is_empty() => eprintln!(
                     "{what}: detected {found:?}{}",
@@ -187,10 +187,10 @@ fn demo_frames_give_both_hands_of_the_right_sides() {
             }
         }
     }
-    // Known misses (docs/detection.md, "Limits"): in these copies of 01 the landmark model
-    // calls a crop of the right hand "left", and that crop wins. The list is exact, so a fix
-    // (or a new miss) shows here.
-    let known = ["01 resized 0.75", "01 resized 2.5", "01 rotated 20"];
+    // Known misses (docs/detection.md, "Limits"): in these copies of 01 the palm detector
+    // misses the left hand and the landmark model calls a crop of the right hand "left" (at
+    // 0.85 and 0.96), and that crop wins. The list is exact, so a fix (or a new miss) shows.
+    let known = ["01 resized 2.5", "01 rotated 20"];
     let missed: Vec<&str> = known
         .iter()
         .copied()
@@ -201,7 +201,7 @@ fn demo_frames_give_both_hands_of_the_right_sides() {
         .filter(|f| !known.iter().any(|k| f.starts_with(&format!("{k}:"))))
         .collect();
     assert!(new.is_empty(), "new misses: {new:#?}");
-    if failures.len() == 3 {
+    if failures.len() == known.len() {
         assert_eq!(missed.len(), known.len(), "{failures:#?}");
     } else {
         eprintln!("fewer misses than known: {failures:#?} (update the list)");
