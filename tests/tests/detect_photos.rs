@@ -125,7 +125,7 @@ fn tiny_hands_and_grey_photos_are_no_hands() {
 /// in the photo, each hand nearer its own side's joints than the other's, and a missing hand
 /// is named. (Here the left hand keeps only its fingertips: the landmark model puts a small,
 /// collapsed left hand on them, which the fit and the refinement against the photo start
-/// from.)
+/// from.) A hand that reaches the border is said to: it may be cut off.
 #[test]
 fn a_hand_cut_by_the_border_is_still_found_or_named() {
     let dir = scratch("detect-photos-cut");
@@ -171,6 +171,19 @@ fn a_hand_cut_by_the_border_is_still_found_or_named() {
             }
         }
     }
+    // The right hand's wrist lies off the cut photo: the detection says it reaches the
+    // border; the uncut photo's hands do not.
+    assert!(det.at_border(Side::Right), "{:?}", det.hand(Side::Right));
+    assert!(
+        found
+            .lines()
+            .iter()
+            .any(|l| l.starts_with("right hand") && l.contains("border")),
+        "{:?}",
+        found.lines()
+    );
+    let whole = detect_photo(&save(&dir, "whole.png", &img), &Device::flex()).unwrap();
+    assert!(Side::BOTH.iter().all(|&s| !whole.detection.at_border(s)));
     match det.require_both(&path) {
         Ok(()) => {}
         Err(e) => {

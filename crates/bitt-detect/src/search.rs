@@ -752,6 +752,12 @@ impl TwoHandDetection {
                 )),
                 None => notes.push(format!("no {} hand detected", side.as_str())),
             }
+            if self.at_border(side) {
+                notes.push(format!(
+                    "the {} hand reaches the photo's border: it may be cut off, and its hidden keypoints are guesses (check the overlay)",
+                    side.as_str()
+                ));
+            }
         }
         TwoHandKeypoints {
             left: hand(&self.left),
@@ -759,6 +765,24 @@ impl TwoHandDetection {
             format: KeypointFormat::Plain,
             notes,
         }
+    }
+
+    /// Whether the detected hand of `side` reaches the photo's border: one of its landmarks
+    /// lies outside the photo or within 1 % of its long side from an edge. Such a hand may be
+    /// cut off, and its hidden landmarks are the landmark model's guesses. (A hand placed by
+    /// hypothesis is a guess anyway: never.)
+    pub fn at_border(&self, side: Side) -> bool {
+        let [w, h] = self.image_size.map(f64::from);
+        let margin = 0.01 * w.max(h);
+        let detected = self.hand(side).filter(|hand| hand.stage != "hypothesis");
+        detected.is_some_and(|hand| {
+            hand.points.iter().any(|p| {
+                p[0] < margin - 0.5
+                    || p[1] < margin - 0.5
+                    || p[0] > w - 0.5 - margin
+                    || p[1] > h - 0.5 - margin
+            })
+        })
     }
 
     /// The side whose hand was placed by hypothesis rather than detected, if any.

@@ -108,6 +108,13 @@ pub fn detect_photo(image: &Path, device: &Device) -> Result<PhotoDetection, Bit
 
 /// One line for a found hand: side, presence, stage (and how sure the side is).
 fn hand_line(hand: &bitt_detect::DetectedHand) -> String {
+    if hand.stage == "hypothesis" {
+        return format!(
+            "{} hand: not detected; placed by hypothesis, interlocked with the {} hand (check the overlay)",
+            hand.side.as_str(),
+            hand.side.mirrored().as_str()
+        );
+    }
     let palm = hand
         .palm_score
         .map_or(String::new(), |p| format!(", palm score {p:.2}"));
@@ -126,8 +133,15 @@ impl PhotoDetection {
     pub fn lines(&self) -> Vec<String> {
         Side::BOTH
             .iter()
-            .filter_map(|&side| self.detection.hand(side))
-            .map(hand_line)
+            .filter_map(|&side| {
+                let hand = self.detection.hand(side)?;
+                let border = if self.detection.at_border(side) {
+                    "; it reaches the photo's border and may be cut off"
+                } else {
+                    ""
+                };
+                Some(format!("{}{border}", hand_line(hand)))
+            })
             .collect()
     }
 
@@ -445,7 +459,11 @@ pub fn detection_summary(record: &serde_json::Value) -> String {
     let hands: Vec<String> = recorded_hands(record)
         .into_iter()
         .map(|(side, presence, _, _, stage)| {
-            format!("{side} presence {presence:.2} ({stage} stage)")
+            if stage == "hypothesis" {
+                format!("{side} placed by hypothesis (not detected)")
+            } else {
+                format!("{side} presence {presence:.2} ({stage} stage)")
+            }
         })
         .collect();
     if hands.is_empty() {
