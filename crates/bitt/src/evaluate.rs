@@ -29,6 +29,45 @@ pub struct Avatar {
     pub camera: PinholeCamera,
 }
 
+/// The highest HSV saturation a fine texel may have: skin never comes near it (the demo
+/// frames' coarse textures reach 0.44, their visible albedo texels 0.62), while a few
+/// hidden texels BTR invented on `02` reached 0.99 (saturated green; docs/training.md,
+/// Real data). Issue 34's acceptance threshold.
+pub const MAX_SKIN_SATURATION: f32 = 0.85;
+
+/// HSV saturation of an RGB value, `(max - min) / max` (0 for black).
+pub fn hsv_saturation(rgb: [f32; 3]) -> f32 {
+    let max = rgb[0].max(rgb[1]).max(rgb[2]);
+    let min = rgb[0].min(rgb[1]).min(rgb[2]);
+    if max <= 0.0 {
+        0.0
+    } else {
+        (max - min.max(0.0)) / max
+    }
+}
+
+/// Replaces each texel of `fine` (`[3, T]`) whose HSV saturation, as it is or rounded to 8
+/// bits, is above [`MAX_SKIN_SATURATION`] with the same texel of `coarse` (the texture
+/// prior's); returns how many were replaced. The avatar's fine textures pass through it, so
+/// no file, render or score carries a texel no skin has.
+pub fn replace_implausible_texels(fine: &mut [f32], coarse: &[f32]) -> usize {
+    let t = fine.len() / 3;
+    let mut replaced = 0;
+    for i in 0..t {
+        let rgb = [fine[i], fine[t + i], fine[2 * t + i]];
+        // As written to an 8-bit PNG too: rounding moves a dark texel's saturation by up to
+        // a few hundredths.
+        let png = rgb.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() / 255.0);
+        if hsv_saturation(rgb).max(hsv_saturation(png)) > MAX_SKIN_SATURATION {
+            for c in 0..3 {
+                fine[c * t + i] = coarse[c * t + i];
+            }
+            replaced += 1;
+        }
+    }
+    replaced
+}
+
 impl Avatar {
     /// Reads the avatar of the trainer's current networks (one forward pass).
     pub fn from_trainer(trainer: &Trainer) -> Result<Self, BittError> {
@@ -50,9 +89,14 @@ impl Avatar {
             LightValues::from_array(values.try_into().map_err(|_| {
                 BittError::Invalid("the light network did not give 12 values".into())
             })?);
+        let mut fine = pair(&o.fine)?;
+        let coarse = pair(&o.coarse)?;
+        for (f, c) in fine.iter_mut().zip(&coarse) {
+            replace_implausible_texels(f, c);
+        }
         let avatar = Avatar {
-            fine: pair(&o.fine)?,
-            coarse: pair(&o.coarse)?,
+            fine,
+            coarse,
             albedo_uv: pair(&o.unwrapped)?,
             visible: pair(&trainer.view.visible)?,
             light,
@@ -293,5 +337,16 @@ mod tests {
         // Hidden on both: left 2 and right 2.
         near(fine.invisible, 0.4);
         near(coarse.invisible, 0.0);
+    }
+
+    #[test]
+    fn implausible_texels_take_the_prior() {
+        // Three texels: skin, saturated green (BTR's outlier), black.
+        let mut fine = vec![0.6, 0.1, 0.0, 0.4, 1.0, 0.0, 0.3, 0.02, 0.0];
+        let coarse = vec![0.5, 0.3, 0.1, 0.3, 0.16, 0.05, 0.2, 0.09, 0.02];
+        assert!((hsv_saturation([0.1, 1.0, 0.02]) - 0.98).abs() < 1e-6);
+        assert_eq!(hsv_saturation([0.0; 3]), 0.0);
+        assert_eq!(replace_implausible_texels(&mut fine, &coarse), 1);
+        assert_eq!(fine, vec![0.6, 0.3, 0.0, 0.4, 0.16, 0.0, 0.3, 0.09, 0.0]);
     }
 }

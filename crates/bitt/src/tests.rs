@@ -52,7 +52,8 @@ fn scratch(name: &str) -> std::path::PathBuf {
     d
 }
 
-/// The loss falls, and the first loss is the same on every backend (same initial weights).
+/// The loss falls, the first loss is the same on every backend (same initial weights), and
+/// the avatar's fine textures stay within skin's saturation.
 #[test]
 fn loss_falls_and_backends_agree_on_the_first_loss() {
     let (mut config, scene, pca) = tiny();
@@ -71,6 +72,18 @@ fn loss_falls_and_backends_agree_on_the_first_loss() {
             h[4].total
         );
         first.push(h[0].total);
+        // The avatar's fine textures hold no texel no skin has (issue 34, outliers).
+        let avatar = crate::evaluate::Avatar::from_trainer(&t).unwrap();
+        for fine in &avatar.fine {
+            let n = fine.len() / 3;
+            let worst = (0..n)
+                .map(|i| crate::evaluate::hsv_saturation([fine[i], fine[n + i], fine[2 * n + i]]))
+                .fold(0.0f32, f32::max);
+            assert!(
+                worst <= crate::evaluate::MAX_SKIN_SATURATION,
+                "{name}: {worst}"
+            );
+        }
     }
     let rel = (first[0] - first[1]).abs() / first[0];
     assert!(rel < 1e-4, "first losses differ across backends: {first:?}");
