@@ -304,6 +304,24 @@ mod tests {
         p.to_str().unwrap()
     }
 
+    /// `bitt train-scene --resume OUT --iterations N --cache CACHE --turntable 0`.
+    fn resume_args(out: &Path, cache: &Path, iterations: usize) -> TrainSceneArgs {
+        let n = iterations.to_string();
+        Cli::try_parse_from([
+            "bitt",
+            "--resume",
+            s(out),
+            "--iterations",
+            &n,
+            "--cache",
+            s(cache),
+            "--turntable",
+            "0",
+        ])
+        .unwrap()
+        .args
+    }
+
     /// `--config FILE` replaces the preset (the run's `config.json` is that file's content);
     /// it conflicts with `--preset`, and a broken file is named and leaves nothing behind.
     #[test]
@@ -384,19 +402,7 @@ mod tests {
         // An existing run is refused; --resume continues it.
         let e = format!("{:#}", run(&args(&first)).unwrap_err());
         assert!(e.contains("--resume"), "{e}");
-        let resume = Cli::try_parse_from([
-            "bitt",
-            "--resume",
-            s(&out),
-            "--iterations",
-            "3",
-            "--cache",
-            s(&cache),
-            "--turntable",
-            "0",
-        ])
-        .unwrap()
-        .args;
+        let resume = resume_args(&out, &cache, 3);
         // A temporary left by a killed checkpoint write is removed on resume.
         let stale = out.join(".checkpoint.safetensors.tmp4000000");
         std::fs::write(&stale, b"half a checkpoint").unwrap();
@@ -744,19 +750,7 @@ mod tests {
         );
         // --resume continues from the record: the detection is not made again.
         let detection_bytes = std::fs::read(out.join("detection.json")).unwrap();
-        let resume = Cli::try_parse_from([
-            "bitt",
-            "--resume",
-            s(&out),
-            "--iterations",
-            "3",
-            "--cache",
-            s(&cache),
-            "--turntable",
-            "0",
-        ])
-        .unwrap()
-        .args;
+        let resume = resume_args(&out, &cache, 3);
         run(&resume).unwrap();
         assert_eq!(read("metrics.json")["history"].as_array().unwrap().len(), 3);
         assert_eq!(

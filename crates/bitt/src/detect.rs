@@ -422,14 +422,7 @@ pub fn detect_hands_into(
 /// # Errors
 /// A file that is there but is not JSON.
 pub fn read_detection(dir: &Path) -> Result<Option<serde_json::Value>, BittError> {
-    let path = dir.join(DETECTION_JSON);
-    if !path.is_file() {
-        return Ok(None);
-    }
-    let text = std::fs::read_to_string(&path).map_err(|e| BittError::io(&path, e))?;
-    serde_json::from_str(&text)
-        .map(Some)
-        .map_err(|e| BittError::corrupt(&path, format!("not JSON: {e}")))
+    crate::outputs::read_json_if_present(&dir.join(DETECTION_JSON))
 }
 
 /// The hands of a [`DETECTION_JSON`] record: per side found, its presence, probability of

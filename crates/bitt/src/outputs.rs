@@ -126,6 +126,20 @@ pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), Bit
     Ok(())
 }
 
+/// The JSON file at `path`, or `None` when there is no file.
+///
+/// # Errors
+/// A file that is there but cannot be read or is not JSON (naming it).
+pub fn read_json_if_present(path: &Path) -> Result<Option<serde_json::Value>, BittError> {
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(path).map_err(|e| BittError::io(path, e))?;
+    serde_json::from_str(&text)
+        .map(Some)
+        .map_err(|e| BittError::corrupt(path, format!("not JSON: {e}")))
+}
+
 /// Base64 of bytes (for images embedded in the HTML report).
 pub fn base64(bytes: &[u8]) -> String {
     const T: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";

@@ -121,14 +121,7 @@ pub fn write_training_refinement(
 
 /// The `refine.json` of a run folder, if it has one.
 fn read_refinement(dir: &Path) -> Result<Option<serde_json::Value>, BittError> {
-    let path = dir.join(files::REFINE);
-    if !path.is_file() {
-        return Ok(None);
-    }
-    let text = std::fs::read_to_string(&path).map_err(|e| BittError::io(&path, e))?;
-    serde_json::from_str(&text)
-        .map(Some)
-        .map_err(|e| BittError::corrupt(&path, format!("not JSON: {e}")))
+    crate::outputs::read_json_if_present(&dir.join(files::REFINE))
 }
 
 /// The texture PCA of `config.texture`, read from `cache_dir` when fitted before, else fitted
