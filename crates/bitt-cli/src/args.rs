@@ -31,6 +31,15 @@ impl TrainingArgs {
             self.preset,
         )?)
     }
+
+    /// The configuration these options name, for training on a real photo (`quick` at the
+    /// photo's crop size: `TrainConfig::preset_for_photo`).
+    pub fn read_for_photo(&self) -> Result<TrainConfig> {
+        Ok(bitt::config_files::photo_training_config(
+            self.config.as_deref(),
+            self.preset,
+        )?)
+    }
 }
 
 /// The hand models and texture prior of real data (`train-scene`, `refine-hands`,

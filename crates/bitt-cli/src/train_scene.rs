@@ -235,10 +235,13 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
             if let Some(note) = note {
                 println!("{note}");
             }
-            let config = args
-                .training
-                .read()?
-                .with_overrides(args.iterations, args.seed)?;
+            let photo = args.image.is_some() || args.interhand.is_some();
+            let config = if photo {
+                args.training.read_for_photo()?
+            } else {
+                args.training.read()?
+            };
+            let config = config.with_overrides(args.iterations, args.seed)?;
             let (trainer, input) =
                 start_fresh(&out, &request(args)?, config, &device, &mut SetupLines)?;
             (out, trainer, input)

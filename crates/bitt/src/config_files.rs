@@ -29,6 +29,21 @@ pub fn training_config(config: Option<&Path>, preset: Preset) -> Result<TrainCon
     }
 }
 
+/// As [`training_config`], for training on a real photo: the named preset is
+/// [`TrainConfig::preset_for_photo`] (a file is taken as it is).
+///
+/// # Errors
+/// The file cannot be read or is not a valid configuration.
+pub fn photo_training_config(
+    config: Option<&Path>,
+    preset: Preset,
+) -> Result<TrainConfig, BittError> {
+    match config {
+        Some(_) => training_config(config, preset),
+        None => Ok(TrainConfig::preset_for_photo(preset)),
+    }
+}
+
 /// `what` read from `file` and checked by `validate` (its error then names the file), else
 /// the default.
 fn checked_file<T: Serialize + DeserializeOwned + Default>(
