@@ -25,6 +25,22 @@ enum Value {
     Matrix(Tensor<3>),
 }
 
+impl Value {
+    /// All values of the batch in TFLite's row-major order (NHWC for images), flat.
+    fn flat_in_tflite_order(self) -> Tensor<1> {
+        match self {
+            Value::Image(x) => {
+                let [n, c, h, w] = x.dims();
+                x.permute([0, 2, 3, 1]).reshape([n * h * w * c])
+            }
+            Value::Matrix(x) => {
+                let [n, r, c] = x.dims();
+                x.reshape([n * r * c])
+            }
+        }
+    }
+}
+
 /// The weights of one operation, laid out for burn.
 #[derive(Debug, Clone)]
 enum Weights {
@@ -426,16 +442,7 @@ impl Network {
             }
             Op::Reshape { input, output } => {
                 let target = self.shape_of(*output, n)?;
-                let flat = match self.get(values, *input, k)? {
-                    Value::Image(x) => {
-                        let [n, c, h, w] = x.dims();
-                        x.permute([0, 2, 3, 1]).reshape([n * h * w * c])
-                    }
-                    Value::Matrix(x) => {
-                        let [n, r, c] = x.dims();
-                        x.reshape([n * r * c])
-                    }
-                };
+                let flat = self.get(values, *input, k)?.flat_in_tflite_order();
                 let total: usize = target.iter().product();
                 if flat.dims()[0] != total {
                     return Err(err(format!(
@@ -517,16 +524,7 @@ impl Network {
                     return Err(err("weights missing".into()));
                 };
                 let [inp, out] = w.dims();
-                let flat = match self.get(values, *input, k)? {
-                    Value::Image(x) => {
-                        let [n, c, h, w] = x.dims();
-                        x.permute([0, 2, 3, 1]).reshape([n * h * w * c])
-                    }
-                    Value::Matrix(x) => {
-                        let [n, r, c] = x.dims();
-                        x.reshape([n * r * c])
-                    }
-                };
+                let flat = self.get(values, *input, k)?.flat_in_tflite_order();
                 let total = flat.dims()[0];
                 if total % (n * inp) != 0 {
                     return Err(err(format!("{total} values do not make rows of {inp}")));
