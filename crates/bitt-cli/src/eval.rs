@@ -38,6 +38,12 @@ pub struct EvalArgs {
     /// InterHand2.6M root (`images/`, `annotations/`), with `--dataset interhand`.
     #[arg(long)]
     pub root: Option<PathBuf>,
+    /// Photos of the same hands, each `IMAGE:ANNOTATION` (a BiTT pickle or the `hands.json`
+    /// of `refine-hands` / `fit-hands`): each is the input view once and a novel pose of the
+    /// others, scored in its own hand mask (docs/results/photos.md). Trains at the photo's
+    /// 256 px crop with `quick` unless --preset or --config is given.
+    #[arg(long, num_args = 2.., conflicts_with = "root")]
+    pub photos: Vec<String>,
     /// InterHand2.6M split.
     #[arg(long, default_value = "test")]
     pub split: String,
@@ -110,20 +116,35 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         None => (0, 1),
     };
     if args.dataset == Dataset::Synthetic
+        && args.photos.is_empty()
         && (args.root.is_some() || args.model_dir.is_some() || args.html_dir.is_some())
     {
-        bail!("--root, --model-dir and --html-dir are for --dataset interhand");
+        bail!("--root, --model-dir and --html-dir are for --dataset interhand or --photos");
     }
-    let config = args
-        .training
-        .read()?
-        .with_overrides(args.iterations, None)?;
+    let photos = args
+        .photos
+        .iter()
+        .map(|p| bitt::benchmark::Photo::parse(p))
+        .collect::<Result<Vec<_>, _>>()?;
+    if !photos.is_empty() && args.dataset != Dataset::Synthetic {
+        bail!("--photos brings its own scenes; leave out --dataset");
+    }
+    let config = match photos.is_empty() {
+        true => args.training.read()?,
+        false => args.training.read_for_photo()?,
+    }
+    .with_overrides(args.iterations, None)?;
     let baseline = BaselineConfig {
         iterations: args.baseline_iterations,
         ..BaselineConfig::default()
     };
     let device = args.device.device()?.autodiff();
     let source = match args.dataset {
+        Dataset::Synthetic if !photos.is_empty() => EvalSource::Photos {
+            photos: &photos,
+            model_dir: args.model_dir.as_deref(),
+            html_dir: args.html_dir.as_deref(),
+        },
         Dataset::Synthetic => EvalSource::Synthetic,
         Dataset::Interhand => EvalSource::InterHand {
             root: args.root.as_deref(),
@@ -170,7 +191,9 @@ pub fn merge_cmd(args: &MergeArgs) -> Result<()> {
 mod tests {
     use super::*;
     use bitt::benchmark::SceneResult;
-    use bitt_tests::real_fixture::{scratch, write_mini_interhand};
+    use bitt_tests::real_fixture::{
+        AnnotationOptions, scratch, write_annotation, write_image, write_mini_interhand,
+    };
     use std::path::Path;
 
     type Cli = crate::test_args::Parsed<EvalArgs>;
@@ -258,6 +281,105 @@ mod tests {
         .args;
         let e = format!("{:#}", run(&missing).unwrap_err());
         assert!(e.contains("nope"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// `eval --photos`: two photos of the "same hands", each trained on once and scored on
+    /// the other, in the photo's own hand mask; the table, a contact sheet per photo, resume,
+    /// and refusals (one photo, a missing file) that write nothing.
+    #[test]
+    fn photo_pairs_are_scored_both_ways_in_the_photos_masks() {
+        let dir = scratch("cli-eval-photos");
+        let (a, b) = (dir.join("a.jpg"), dir.join("b.jpg"));
+        let (pa, pb) = (dir.join("a.pkl"), dir.join("b.pkl"));
+        write_image(&a, 256, 256, None);
+        write_image(&b, 256, 256, None);
+        write_annotation(&pa, AnnotationOptions::default());
+        write_annotation(
+            &pb,
+            AnnotationOptions {
+                turn: -0.3,
+                ..AnnotationOptions::default()
+            },
+        );
+        let (out, cache) = (dir.join("eval"), dir.join("cache"));
+        let photo = |i: &Path, p: &Path| format!("{}:{}", i.display(), p.display());
+        let (ja, jb) = (photo(&a, &pa), photo(&b, &pb));
+        let parse = |photos: &[&str], out: &Path| {
+            let mut all = vec![
+                "bitt",
+                "--preset",
+                "tiny",
+                "--iterations",
+                "1",
+                "--baseline-iterations",
+                "2",
+                "--methods",
+                "bitt,html,harp-like",
+                "--cache",
+                s(&cache),
+                "--out",
+                s(out),
+                "--photos",
+            ];
+            all.extend_from_slice(photos);
+            Cli::try_parse_from(all).unwrap().args
+        };
+        run(&parse(&[&ja, &jb], &out)).unwrap();
+        let md = std::fs::read_to_string(out.join("results.md")).unwrap();
+        assert!(md.contains("## Real photos"), "{md}");
+        for row in [
+            "| a -> b | bitt |",
+            "| b -> a | harp-like |",
+            "| a -> a (input view) | html |",
+        ] {
+            assert!(md.contains(row), "{row}: {md}");
+        }
+        assert!(md.contains("| a & b |"), "consistency: {md}");
+        let results: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap())
+                .unwrap();
+        let scenes = results["scenes"].as_array().unwrap();
+        assert_eq!(scenes.len(), 2);
+        for scene in scenes {
+            let photo = &scene["methods"]["bitt"]["photo"];
+            let cov = photo["novel_poses"]["coverage"].as_f64().unwrap();
+            let holes = photo["input_view"]["holes"].as_f64().unwrap();
+            assert!(cov > 0.0 && cov <= 1.0, "{cov}");
+            assert!((0.0..=1.0).contains(&holes), "{holes}");
+            assert!(photo["novel_poses"]["hand_mask"]["psnr"].as_f64().unwrap() > 3.0);
+        }
+        let c = &results["photo_consistency"][0];
+        assert!(c["shared_texels"].as_u64().unwrap() > 0, "{c}");
+        assert!(c["l1_gain_fitted"].as_f64().unwrap() >= 0.0, "{c}");
+        let sheets = std::fs::read_dir(out.join("sheets")).unwrap().count();
+        assert_eq!(sheets, 3, "two sheets and columns.txt");
+        // Each sheet: the input view, then the other photo; input, photo and three methods.
+        for e in std::fs::read_dir(out.join("sheets")).unwrap() {
+            let p = e.unwrap().path();
+            if p.extension().is_some_and(|x| x == "png") {
+                let (w, h) = image::image_dimensions(&p).unwrap();
+                assert_eq!(w * 2, h * 5, "{}: {w}x{h}", p.display());
+            }
+        }
+        // A rerun finds both done and trains nothing.
+        let before = std::fs::read_to_string(out.join("results.json")).unwrap();
+        run(&parse(&[&ja, &jb], &out)).unwrap();
+        assert_eq!(
+            std::fs::read_to_string(out.join("results.json")).unwrap(),
+            before
+        );
+        // A missing file is named and nothing is written.
+        let fresh = dir.join("eval2");
+        let missing = photo(&dir.join("nope.jpg"), &pb);
+        let e = format!("{:#}", run(&parse(&[&ja, &missing], &fresh)).unwrap_err());
+        assert!(e.contains("nope.jpg"), "{e}");
+        assert!(!fresh.exists());
+        // One photo is refused by the parser.
+        assert!(
+            Cli::try_parse_from(["bitt", "--photos", ja.as_str()]).is_err(),
+            "one photo"
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

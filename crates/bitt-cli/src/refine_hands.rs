@@ -39,8 +39,8 @@ pub struct RefineHandsArgs {
     /// A refinement configuration (JSON, the `report.config` of a `refine.json`, edited).
     #[arg(long)]
     pub refine_config: Option<PathBuf>,
-    /// Working image size for a photo (default: 256, the BiTT crop the demo annotations are
-    /// for and the paper's image size; a scene is refined at the preset's image size).
+    /// Working image size (default: a photo at 256, the BiTT crop the demo annotations are
+    /// for and the paper's image size; a scene at its own image size).
     #[arg(long)]
     pub size: Option<usize>,
     /// Iterations of the rigid stage (default 40).
@@ -77,7 +77,10 @@ pub fn run(args: &RefineHandsArgs) -> Result<()> {
             bail!("--scene refines a synthetic scene's procedural hands: drop --model-dir/--mask");
         }
         let scene = SynthScene::read(dir).with_context(|| format!("--scene {}", dir.display()))?;
-        let done = refine_scene(&scene, &train, &config, cache, &device, &mut bar)
+        if let Some(size) = args.size.filter(|s| !(32..=1024).contains(s)) {
+            bail!("--size must be within 32-1024, got {size}");
+        }
+        let done = refine_scene(&scene, &train, args.size, &config, cache, &device, &mut bar)
             .with_context(|| format!("refining --scene {}", dir.display()))?;
         done.write(&args.out)?;
         done.report_lines()
@@ -219,6 +222,60 @@ mod tests {
             std::fs::read_to_string(foreign.join("notes.txt")).unwrap(),
             "mine"
         );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// `--scene` refines at the scene's own image size unless `--size` says otherwise, and
+    /// scores the refined meshes against the true ones.
+    #[test]
+    fn a_scene_is_refined_at_its_own_size() {
+        let dir = scratch("cli-refine-scene");
+        let synth = bitt_synth::SynthConfig {
+            size: 64,
+            texture_size: 64,
+            novel_views: 0,
+            novel_poses: 0,
+            mesh_noise: Some(bitt_synth::MeshNoise::default()),
+            ..bitt_synth::SynthConfig::default()
+        };
+        let scene = bitt_synth::generate_scene(&synth, 3, &burn::tensor::Device::flex()).unwrap();
+        let folder = dir.join("scene");
+        scene.write(&folder).unwrap();
+        let cache = dir.join("cache");
+        for (size, expect) in [(None, 64), (Some("48"), 48)] {
+            let out = dir.join(format!("out-{expect}"));
+            let mut extra = vec![
+                "--scene",
+                folder.to_str().unwrap(),
+                "--cache",
+                cache.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+            ];
+            if let Some(s) = size {
+                extra.extend(["--size", s]);
+            }
+            run(&args(&extra)).unwrap();
+            let record: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(out.join("refine.json")).unwrap())
+                    .unwrap();
+            assert_eq!(record["report"]["image_size"][0], expect, "{record}");
+            assert!(record["vertex_error_px"]["after"]["mean"].as_f64().unwrap() >= 0.0);
+        }
+        let bad = dir.join("out-bad");
+        let e = format!(
+            "{:#}",
+            run(&args(&[
+                "--scene",
+                folder.to_str().unwrap(),
+                "--size",
+                "8",
+                "--out",
+                bad.to_str().unwrap()
+            ]))
+            .unwrap_err()
+        );
+        assert!(e.contains("--size must be within 32-1024"), "{e}");
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

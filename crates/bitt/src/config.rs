@@ -87,6 +87,18 @@ pub struct LossWeights {
     /// demo scene that measured no better (see `docs/training.md`).
     #[serde(default = "yes")]
     pub alb_through_scene: bool,
+    /// Real photos only: the photo is trusted at the pixels whose mean RGB is above this
+    /// (the refinement's hand-mask rule, 0.15); where the meshes cover a darker pixel
+    /// (background they overhang, or a shadow) the reconstruction losses ignore it and no
+    /// texel is unwrapped from it (`TrainingView::trust_photo`). 0 trusts every pixel, as
+    /// the paper and the reference do. Not from the paper: it stops background and shadow
+    /// from going into the albedo (issue 34).
+    #[serde(default = "photo_mask_default")]
+    pub photo_mask: f64,
+}
+
+fn photo_mask_default() -> f64 {
+    0.15
 }
 
 impl Default for LossWeights {
@@ -99,6 +111,7 @@ impl Default for LossWeights {
             alb: 0.2,
             sym: 0.3,
             alb_through_scene: true,
+            photo_mask: photo_mask_default(),
         }
     }
 }

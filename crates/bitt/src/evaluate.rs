@@ -46,6 +46,14 @@ pub fn hsv_saturation(rgb: [f32; 3]) -> f32 {
     }
 }
 
+/// The highest HSV saturation of any texel of a texture `[3, T]` (0 for none).
+pub fn max_hsv_saturation(texture: &[f32]) -> f32 {
+    let t = texture.len() / 3;
+    (0..t)
+        .map(|i| hsv_saturation([texture[i], texture[t + i], texture[2 * t + i]]))
+        .fold(0.0, f32::max)
+}
+
 /// Replaces each texel of `fine` (`[3, T]`) whose HSV saturation, as it is or rounded to 8
 /// bits, is above [`MAX_SKIN_SATURATION`] with the same texel of `coarse` (the texture
 /// prior's); returns how many were replaced. The avatar's fine textures pass through it, so

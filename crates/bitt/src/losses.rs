@@ -83,15 +83,19 @@ fn l1<const D: usize>(a: Tensor<D>, b: Tensor<D>) -> Tensor<1> {
 /// The paper's total loss (eq. 10) for one forward pass.
 ///
 /// - `L_rec = |I - I_fine| + 0.8 |I - I_coarse| + 0.4 |I - I_albedo|` with `I = I_hand`, the
-///   input image times the hand mask (the renders are black off the hands);
+///   input image times the hand mask (the renders are black off the hands), each pixel
+///   times the view's weight (1, or 0 at a photo's untrusted pixels:
+///   [`TrainingView::trust_photo`]);
 /// - `L_nv = sum_i mean |(T(h_i) - t̂_i)(1 - v_i)|`;
 /// - `L_alb = sum_{i<j} mean |A(I_coarse,l_i) - A(I_coarse,l_j)|` over the three lights;
 /// - `L_sym = mean |t̂_l - t̂_r|`.
 pub fn loss(outputs: &Outputs, view: &TrainingView, w: &LossWeights) -> Loss {
     let target = view.hand_image.clone();
-    let rec_fine = l1(outputs.fine_image.clone(), target.clone());
-    let rec_coarse = l1(outputs.coarse_image.clone(), target.clone());
-    let rec_albedo = l1(outputs.albedo_render.clone(), target);
+    let weight = view.weight.clone();
+    let rec = |render: Tensor<4>| ((render - target.clone()) * weight.clone()).abs().mean();
+    let rec_fine = rec(outputs.fine_image.clone());
+    let rec_coarse = rec(outputs.coarse_image.clone());
+    let rec_albedo = rec(outputs.albedo_render.clone());
     let nv = (0..2)
         .map(|i| {
             let hidden = view.visible[i].clone().neg().add_scalar(1.0);

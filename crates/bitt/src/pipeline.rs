@@ -25,6 +25,9 @@ pub struct TrainingView {
     pub plans: [UnwrapPlan; 2],
     /// Visible masks `v_i` `[1, 1, T]`, left then right.
     pub visible: [Tensor<3>; 2],
+    /// Per-pixel weight of the reconstruction losses, `[1, 1, S, S]`: 1, except 0 where a
+    /// photo's pixel is not trusted ([`TrainingView::trust_photo`]).
+    pub weight: Tensor<4>,
 }
 
 impl TrainingView {
@@ -103,6 +106,7 @@ impl TrainingView {
         Ok(TrainingView {
             geometry,
             image,
+            weight: Tensor::<4>::ones([1, 1, h, w], device),
             mask,
             hand_image,
             plans,
@@ -110,6 +114,86 @@ impl TrainingView {
         })
     }
 
+    /// Trusts the photo only at the pixels `keep` `[S * S]` (its hand pixels, for example mean
+    /// RGB above a threshold): where the meshes cover a pixel that is not kept (background
+    /// the mesh overhangs, or a shadow too dark to tell the skin) the reconstruction losses
+    /// stop pulling the renders towards it, and no texel is unwrapped from it (it becomes
+    /// not visible, so the coarse texture and BTR fill it). Returns the texels dropped per
+    /// hand and the fraction of the meshes' pixels kept. A hand that would be left without a
+    /// visible texel keeps its texels; a mask that keeps none of the meshes' pixels changes
+    /// nothing.
+    ///
+    /// # Errors
+    /// A mask of another size than the view's.
+    pub fn trust_photo(&mut self, keep: &[bool]) -> Result<PhotoTrust, BittError> {
+        let [_, _, h, w] = self.mask.dims();
+        if keep.len() != h * w {
+            return Err(BittError::Invalid(format!(
+                "the photo mask has {} values; the view is {h} x {w}",
+                keep.len()
+            )));
+        }
+        let drawn = read(self.mask.clone().inner())?;
+        let on_mesh = drawn.iter().filter(|&&m| m > 0.5).count();
+        let kept = drawn
+            .iter()
+            .zip(keep)
+            .filter(|&(&m, &k)| m > 0.5 && k)
+            .count();
+        let fraction = kept as f64 / on_mesh.max(1) as f64;
+        if kept == 0 {
+            // A photo dark all over the hands: nothing to trust, nothing changed.
+            return Ok(PhotoTrust {
+                applied: false,
+                dropped: [0, 0],
+                mesh_pixels_kept: fraction,
+            });
+        }
+        let device = self.image.device();
+        let mut dropped = [0, 0];
+        for (i, dropped) in dropped.iter_mut().enumerate() {
+            let mut plan = self.plans[i].clone();
+            let n = plan.restrict(keep)?;
+            // A hand the restriction would leave without a visible texel keeps its own.
+            if plan.visible().iter().any(|&v| v) {
+                let t = plan.num_texels();
+                let v: Vec<f32> = plan
+                    .visible()
+                    .iter()
+                    .map(|&b| f32::from(u8::from(b)))
+                    .collect();
+                self.visible[i] = Tensor::<3>::from_data(TensorData::new(v, [1, 1, t]), &device);
+                self.plans[i] = plan;
+                *dropped = n;
+            }
+        }
+        let weight: Vec<f32> = drawn
+            .iter()
+            .zip(keep)
+            .map(|(&m, &k)| if m > 0.5 && !k { 0.0 } else { 1.0 })
+            .collect();
+        self.weight = Tensor::<4>::from_data(TensorData::new(weight, [1, 1, h, w]), &device);
+        Ok(PhotoTrust {
+            applied: true,
+            dropped,
+            mesh_pixels_kept: fraction,
+        })
+    }
+}
+
+/// What [`TrainingView::trust_photo`] did.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PhotoTrust {
+    /// False when it changed nothing (the mask keeps none of the meshes' pixels).
+    pub applied: bool,
+    /// Visible texels dropped, left then right (0 for a hand that would have had none left,
+    /// which keeps its own).
+    pub dropped: [usize; 2],
+    /// The fraction of the meshes' pixels the photo mask keeps.
+    pub mesh_pixels_kept: f64,
+}
+
+impl TrainingView {
     /// Fraction of visible texels per hand.
     pub fn visible_fraction(&self) -> [f64; 2] {
         let f = |p: &UnwrapPlan| {
@@ -288,4 +372,12 @@ pub fn forward(
         albedo_render,
         consistency_albedos,
     })
+}
+
+/// Reads a tensor back as host `f32`.
+pub fn read<const D: usize>(t: Tensor<D>) -> Result<Vec<f32>, BittError> {
+    t.into_data()
+        .convert::<f32>()
+        .try_into_vec::<f32>()
+        .map_err(|e| BittError::Invalid(format!("reading a tensor back: {e:?}")))
 }

@@ -15,6 +15,7 @@ use crate::checkpoint::Checkpoint;
 use crate::config::TrainConfig;
 use crate::losses::{LossTerms, loss};
 use crate::optim::{Adam, load_parameters, parameters_host};
+pub use crate::pipeline::read;
 use crate::pipeline::{Outputs, TrainingView, forward};
 
 /// Non-finite losses tolerated in one run before giving up.
@@ -526,12 +527,4 @@ pub fn psnr_from_mse(mse: f64) -> f64 {
     } else {
         -10.0 * mse.log10()
     }
-}
-
-/// Reads a tensor back as host `f32`.
-pub fn read<const D: usize>(t: Tensor<D>) -> Result<Vec<f32>, BittError> {
-    t.into_data()
-        .convert::<f32>()
-        .try_into_vec::<f32>()
-        .map_err(|e| BittError::Invalid(format!("reading a tensor back: {e:?}")))
 }

@@ -218,16 +218,7 @@ impl UnwrapPlan {
             // background or a farther surface at a tap would bleed into the sample at a
             // silhouette).
             let texel_depth = camera.view_depth(z, settings.depth);
-            let (c0, r0) = ((px - 0.5).floor(), (py - 0.5).floor());
-            let taps = [
-                (c0, r0),
-                (c0 + 1.0, r0),
-                (c0, r0 + 1.0),
-                (c0 + 1.0, r0 + 1.0),
-            ];
-            visible[k] = taps.iter().all(|&(col, row)| {
-                let col = col.clamp(0.0, (w - 1) as f64) as usize;
-                let row = row.clamp(0.0, (h - 1) as f64) as usize;
+            visible[k] = bilinear_taps(px, py, [h, w]).iter().all(|&(col, row)| {
                 let buffer = frags.depth[row * w + col];
                 buffer.is_finite()
                     && (camera.view_depth(f64::from(buffer), settings.depth) - texel_depth).abs()
@@ -244,6 +235,40 @@ impl UnwrapPlan {
     /// Per texel, visible in the image.
     pub fn visible(&self) -> &[bool] {
         &self.visible
+    }
+
+    /// Keeps only the visible texels whose four bilinear taps all lie on pixels `keep`
+    /// `[H * W]` trusts (a photo's hand pixels): the others become not visible, so nothing is
+    /// unwrapped from the background or a dark shadow at them. Returns how many were dropped.
+    ///
+    /// # Errors
+    /// A mask of another size than the plan's image.
+    pub fn restrict(&mut self, keep: &[bool]) -> Result<usize, RenderError> {
+        let [h, w] = self.size;
+        if keep.len() != h * w {
+            return Err(RenderError::TensorShape {
+                what: "pixel mask",
+                expected: format!("{} (the plan's {h}x{w} pixels)", h * w),
+                actual: vec![keep.len()],
+            });
+        }
+        let mut dropped = 0;
+        for k in 0..self.visible.len() {
+            if !self.visible[k] {
+                continue;
+            }
+            // Back from the sample position to continuous pixels (see `new`).
+            let px = f64::from(self.uv[2 * k]) * (w.max(2) - 1) as f64 + 0.5;
+            let py = (1.0 - f64::from(self.uv[2 * k + 1])) * (h.max(2) - 1) as f64 + 0.5;
+            let trusted = bilinear_taps(px, py, [h, w])
+                .iter()
+                .all(|&(col, row)| keep[row * w + col]);
+            if !trusted {
+                self.visible[k] = false;
+                dropped += 1;
+            }
+        }
+        Ok(dropped)
     }
 
     /// Number of texels `T`.
@@ -286,6 +311,24 @@ impl UnwrapPlan {
             visible_host: self.visible.clone(),
         })
     }
+}
+
+/// The four pixels `(col, row)` a bilinear sample at continuous pixel `(px, py)` (pixel
+/// centres at `c + 1/2`) reads, clamped to the image `[h, w]`.
+fn bilinear_taps(px: f64, py: f64, [h, w]: [usize; 2]) -> [(usize, usize); 4] {
+    let (c0, r0) = ((px - 0.5).floor(), (py - 0.5).floor());
+    let at = |c: f64, r: f64| {
+        (
+            c.clamp(0.0, (w - 1) as f64) as usize,
+            r.clamp(0.0, (h - 1) as f64) as usize,
+        )
+    };
+    [
+        at(c0, r0),
+        at(c0 + 1.0, r0),
+        at(c0, r0 + 1.0),
+        at(c0 + 1.0, r0 + 1.0),
+    ]
 }
 
 /// Unwraps `image` onto the texels of one mesh (see the module docs):

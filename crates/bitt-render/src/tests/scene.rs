@@ -12,7 +12,8 @@ use burn::tensor::{Device, Tensor, TensorData};
 use super::Rng;
 use crate::scene::{
     Camera, DepthRange, LightValues, Material, PointLight, RenderSettings, Scene, SceneGeometry,
-    TexelSurface, TexelVisibilityStats, TexturedMesh, UnwrapSettings, phong, render, unwrap,
+    TexelSurface, TexelVisibilityStats, TexturedMesh, UnwrapPlan, UnwrapSettings, phong, render,
+    unwrap,
 };
 
 fn tensor2(values: Vec<f32>, shape: [usize; 2], device: &Device) -> Tensor<2> {
@@ -443,18 +444,16 @@ fn unwrapping_a_render_recovers_the_texture_on_visible_texels() {
     }
 }
 
-#[test]
-fn unwrap_is_differentiable_in_the_image() {
-    let device = Device::flex().autodiff();
-    let s = hand_scene(64);
+/// Both hands of `s`, white, rendered in its camera (for the unwrap tests' rasters).
+fn white_render(s: &HandScene, device: &Device) -> crate::scene::SceneRender {
     let scene = Scene::new(&[&s.meshes[0], &s.meshes[1]]).unwrap();
     let verts = [
-        vertex_tensor(&s.vertices[0], &device),
-        vertex_tensor(&s.vertices[1], &device),
+        vertex_tensor(&s.vertices[0], device),
+        vertex_tensor(&s.vertices[1], device),
     ];
-    let white = Tensor::<3>::ones([3, 4, 4], &device);
-    let light = LightValues::default().to_light(&device);
-    let out = render(
+    let white = Tensor::<3>::ones([3, 4, 4], device);
+    let light = LightValues::default().to_light(device);
+    render(
         &scene,
         &verts,
         &[white.clone(), white],
@@ -462,7 +461,14 @@ fn unwrap_is_differentiable_in_the_image() {
         &light,
         &RenderSettings::default(),
     )
-    .unwrap();
+    .unwrap()
+}
+
+#[test]
+fn unwrap_is_differentiable_in_the_image() {
+    let device = Device::flex().autodiff();
+    let s = hand_scene(64);
+    let out = white_render(&s, &device);
     let image = Tensor::<3>::ones([3, 64, 64], &device).require_grad();
     let surface = TexelSurface::new(&s.layouts[0], &s.faces[0], s.vertices[0].len()).unwrap();
     let un = unwrap(
@@ -664,4 +670,55 @@ fn a_reused_scene_geometry_shades_like_render() {
             .unwrap_err();
         assert!(err.to_string().contains("texture"), "{name}: {err}");
     }
+}
+
+/// `UnwrapPlan::restrict` drops exactly the visible texels with a bilinear tap on an
+/// untrusted pixel: trusting every pixel drops none, trusting none drops all, and trusting
+/// the left half keeps only texels whose taps all lie there.
+#[test]
+fn restricting_a_plan_drops_texels_on_untrusted_pixels() {
+    let device = Device::flex();
+    let s = hand_scene(64);
+    let out = white_render(&s, &device);
+    let surface = TexelSurface::new(&s.layouts[0], &s.faces[0], s.vertices[0].len()).unwrap();
+    let plan = UnwrapPlan::new(
+        &s.camera,
+        &surface,
+        &s.vertices[0],
+        &out.raster,
+        &UnwrapSettings::default(),
+    )
+    .unwrap();
+    let visible = plan.visible().iter().filter(|&&v| v).count();
+    assert!(visible > 0);
+    let mut all = plan.clone();
+    assert_eq!(all.restrict(&vec![true; 64 * 64]).unwrap(), 0);
+    assert_eq!(all.visible(), plan.visible());
+    let mut none = plan.clone();
+    assert_eq!(none.restrict(&vec![false; 64 * 64]).unwrap(), visible);
+    assert!(none.visible().iter().all(|&v| !v));
+    // The left half (columns < 32): what stays visible samples there, with its right tap too.
+    let left: Vec<bool> = (0..64 * 64).map(|p| p % 64 < 32).collect();
+    let mut half = plan.clone();
+    let dropped = half.restrict(&left).unwrap();
+    let kept = half.visible().iter().filter(|&&v| v).count();
+    assert_eq!(kept + dropped, visible);
+    let image = Tensor::<3>::from_data(
+        burn::tensor::TensorData::new(
+            (0..3 * 64 * 64)
+                .map(|i| (i % 64) as f32)
+                .collect::<Vec<f32>>(),
+            [3, 64, 64],
+        ),
+        &device,
+    );
+    let un = half.apply(image).unwrap();
+    let cols = to_vec(un.texels.narrow(0, 0, 1));
+    for (k, &v) in half.visible().iter().enumerate() {
+        if v {
+            // The sampled column (pixel centres at c + 1/2) lies left of 31.
+            assert!(cols[k] <= 31.0, "texel {k} samples column {}", cols[k]);
+        }
+    }
+    assert!(half.restrict(&[true; 3]).is_err(), "wrong mask size");
 }

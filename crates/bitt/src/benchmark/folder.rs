@@ -4,9 +4,10 @@ use std::path::{Path, PathBuf};
 
 use bitt_mesh::export::write_atomically;
 
+use super::photos::photo_consistency;
 use super::{
-    ContactSheets, MeshSetting, Method, SCENE_RESULT_FORMAT, SceneResult, results_markdown,
-    summarize,
+    ContactSheets, MeshSetting, Method, SCENE_RESULT_FORMAT, SceneResult, photos_markdown,
+    results_markdown, summarize,
 };
 use crate::BittError;
 use crate::baselines::BaselineConfig;
@@ -87,6 +88,12 @@ pub fn interhand_scene_id(split: &str, capture: i64, frame: i64, camera: &str) -
         })
 }
 
+/// A stable id of the photo scene that trains on `image` (`--photos`; FNV-1a of its path as
+/// given): the name of its result file.
+pub fn photo_scene_id(image: &Path) -> u64 {
+    interhand_scene_id("photos", 0, 0, &image.display().to_string())
+}
+
 /// What an evaluation runs: written to `config.json` of its folder.
 #[derive(Debug, Clone, Copy)]
 pub struct EvalPlan<'a> {
@@ -136,7 +143,8 @@ pub fn write_scene(
 }
 
 /// `sheets/{name}.png`: the input, the ground truth and each method at the first novel view
-/// (top row) and the first novel pose (bottom row); `sheets/columns.txt` names the columns.
+/// (top row; photo scenes: the input view) and the first novel pose (bottom row), either row
+/// left out when the scene has no such view; `sheets/columns.txt` names the columns.
 pub fn write_sheet(
     out: &Path,
     name: &str,
@@ -144,14 +152,24 @@ pub fn write_sheet(
     sheets: &ContactSheets,
     size: usize,
 ) -> Result<(), BittError> {
-    let (Some(view), Some(pose)) = (&sheets.view, &sheets.pose) else {
+    let rows: Vec<(&Vec<f32>, usize)> = [(&sheets.view, 0), (&sheets.pose, 1)]
+        .into_iter()
+        .filter_map(|(truth, k)| truth.as_ref().map(|t| (t, k)))
+        .collect();
+    if rows.is_empty() {
         return Ok(());
-    };
-    let mut panels = vec![input.to_vec(), view.clone()];
-    panels.extend(sheets.methods.iter().map(|(_, s)| s.0.clone()));
-    panels.push(input.to_vec());
-    panels.push(pose.clone());
-    panels.extend(sheets.methods.iter().map(|(_, s)| s.1.clone()));
+    }
+    let mut panels = Vec::new();
+    for (truth, k) in rows {
+        panels.push(input.to_vec());
+        panels.push(truth.clone());
+        panels.extend(
+            sheets
+                .methods
+                .iter()
+                .map(|(_, s)| if k == 0 { s.0.clone() } else { s.1.clone() }),
+        );
+    }
     let (img, h, w) = contact_sheet(&panels, size, size, 2 + sheets.methods.len());
     let dir = out.join("sheets");
     std::fs::create_dir_all(&dir).map_err(|e| BittError::io(&dir, e))?;
@@ -190,11 +208,13 @@ pub fn merge(dirs: &[PathBuf]) -> Result<String, BittError> {
         )));
     };
     let summary = summarize(&results);
+    let consistency = photo_consistency(out, &results)?;
     write_json(
         &out.join("results.json"),
         &serde_json::json!({
             "summary": summary,
             "scenes": results,
+            "photo_consistency": consistency,
         }),
     )?;
     let has_lpips = summary
@@ -211,7 +231,11 @@ pub fn merge(dirs: &[PathBuf]) -> Result<String, BittError> {
     } else {
         "unavailable (no LPIPS weights; never estimated)"
     };
-    let md = results_markdown(&summary, note);
+    let mut md = results_markdown(&summary, note);
+    if let Some(photos) = photos_markdown(&results, &consistency) {
+        md.push('\n');
+        md.push_str(&photos);
+    }
     write_atomically(&out.join("results.md"), md.as_bytes())?;
     Ok(md)
 }
@@ -261,6 +285,7 @@ mod tests {
             iterations: 1,
             stats: bitt_synth::TexelStats::from_masks(&[true, false], &[true, true]).unwrap(),
             methods: Default::default(),
+            photos: None,
         }
     }
 

@@ -9,6 +9,7 @@ use bitt_synth::{SynthScene, SynthView, TexelStats};
 use bitt_texture::TexturePca;
 use burn::tensor::Device;
 
+use super::photos::{PhotoScores, SceneTextures, mean_photo_metrics, photo_metrics};
 use super::{MeshSetting, Method, MethodScores, SCENE_RESULT_FORMAT, SceneResult};
 use crate::BittError;
 use crate::assets::ViewGeometry;
@@ -27,26 +28,44 @@ struct Candidate {
     light: LightValues,
 }
 
+/// One scored view's ground truth: the hand image, the posed geometry, the hands and, for
+/// photo scenes, the photo itself with the meshes' silhouette (for [`PhotoMetrics`]).
+struct TruthView {
+    gt: Vec<f32>,
+    geometry: ViewGeometry,
+    hands: TwoHandScene,
+    photo: Option<(Vec<f32>, Vec<f32>)>,
+}
+
 /// Ground truth prepared once per scene: hand images and posed geometry of every view.
 struct Truth {
-    input: (Vec<f32>, ViewGeometry, TwoHandScene),
-    views: Vec<(Vec<f32>, ViewGeometry, TwoHandScene)>,
-    poses: Vec<(Vec<f32>, ViewGeometry, TwoHandScene)>,
+    input: TruthView,
+    views: Vec<TruthView>,
+    poses: Vec<TruthView>,
 }
+
+/// What [`Truth::from_views`] needs of a view: its ground-truth hand image, its hands and
+/// (photo scenes) the photo with the meshes' silhouette.
+type ViewTruth = (Vec<f32>, TwoHandScene, Option<(Vec<f32>, Vec<f32>)>);
 
 impl Truth {
     /// From the input view, the novel views and poses, and `truth`, which gives a view's
-    /// ground-truth hand image and hands.
+    /// ground truth.
     fn from_views<V>(
         trainer: &Trainer,
         (input, views, poses): (&V, &[V], &[V]),
-        truth: impl Fn(&V) -> Result<(Vec<f32>, TwoHandScene), BittError>,
+        truth: impl Fn(&V) -> Result<ViewTruth, BittError>,
         device: &Device,
     ) -> Result<Self, BittError> {
         let prep = |v: &V| {
-            let (gt, hands) = truth(v)?;
+            let (gt, hands, photo) = truth(v)?;
             let geometry = ViewGeometry::new(&trainer.assets, &hands, device)?;
-            Ok::<_, BittError>((gt, geometry, hands))
+            Ok::<_, BittError>(TruthView {
+                gt,
+                geometry,
+                hands,
+                photo,
+            })
         };
         Ok(Truth {
             input: prep(input)?,
@@ -56,7 +75,7 @@ impl Truth {
     }
 
     /// A real scene: each photograph times the silhouettes of its annotated meshes (the
-    /// reference's `masked_img`).
+    /// reference's `masked_img`), and the photograph itself, scored in its own hand mask.
     fn real(trainer: &Trainer, scene: &RealScene, device: &Device) -> Result<Self, BittError> {
         let size = trainer.config.nets.image_size;
         let views = (&scene.train, &scene.novel_views[..], &scene.novel_poses[..]);
@@ -65,18 +84,33 @@ impl Truth {
             views,
             |v: &RealView| {
                 let masks = hand_masks(trainer, &v.hands)?;
-                Ok((hand_image(&v.image, &masks, size * size)?, v.hands.clone()))
+                let gt = hand_image(&v.image, &masks, size * size)?;
+                let drawn = masks[0]
+                    .iter()
+                    .zip(&masks[1])
+                    .map(|(a, b)| a.max(*b))
+                    .collect();
+                Ok((gt, v.hands.clone(), Some((v.image.clone(), drawn))))
             },
             device,
         )
     }
 
-    /// The first novel view's and pose's ground truth (for the contact sheets).
+    /// The first novel view's and pose's ground truth (for the contact sheets; the photo
+    /// itself where there is one). A photo scene has no novel view: its input view takes
+    /// that row.
     fn firsts(&self) -> (Option<Vec<f32>>, Option<Vec<f32>>) {
-        (
-            self.views.first().map(|v| v.0.clone()),
-            self.poses.first().map(|v| v.0.clone()),
-        )
+        let shown = |v: &TruthView| {
+            v.photo
+                .as_ref()
+                .map_or_else(|| v.gt.clone(), |p| p.0.clone())
+        };
+        let view = match (self.views.first(), &self.input.photo) {
+            (Some(v), _) => Some(shown(v)),
+            (None, Some(photo)) => Some(photo.0.clone()),
+            (None, None) => None,
+        };
+        (view, self.poses.first().map(shown))
     }
 
     /// A synthetic scene: each view's image times its true hand masks.
@@ -88,7 +122,7 @@ impl Truth {
             views,
             |v: &SynthView| {
                 let (image, masks, hands) = fit_synthetic_view(v, size)?;
-                Ok((hand_image(&image, &masks, size * size)?, hands))
+                Ok((hand_image(&image, &masks, size * size)?, hands, None))
             },
             device,
         )
@@ -108,36 +142,49 @@ fn score(
 ) -> Result<(MethodScores, SheetImages), BittError> {
     let size = trainer.config.nets.image_size;
     let dims = [3, size, size];
-    let train_camera = truth.input.2.camera;
+    let train_camera = truth.input.hands.camera;
     let mut first = (Vec::new(), Vec::new());
-    let one = |entry: &(Vec<f32>, ViewGeometry, TwoHandScene)| {
-        let (gt, geometry, hands) = entry;
-        let device = geometry.vertices[0].device();
-        let light = move_light(&c.light, &train_camera, &hands.camera).to_light(&device);
-        let img = render_geometry(trainer, geometry, &c.textures, &light)?;
-        let mut m = image_metrics(&img, gt, dims);
+    let one = |entry: &TruthView| {
+        let device = entry.geometry.vertices[0].device();
+        let light = move_light(&c.light, &train_camera, &entry.hands.camera).to_light(&device);
+        let img = render_geometry(trainer, &entry.geometry, &c.textures, &light)?;
+        let mut m = image_metrics(&img, &entry.gt, dims);
         if let Some(net) = lpips {
-            m.lpips = Some(net.distance(&img, gt, dims, &device)?);
+            m.lpips = Some(net.distance(&img, &entry.gt, dims, &device)?);
         }
-        Ok::<_, BittError>((m, img))
+        let photo = entry
+            .photo
+            .as_ref()
+            .and_then(|(photo, drawn)| photo_metrics(&img, photo, drawn, size));
+        Ok::<_, BittError>((m, photo, img))
     };
-    let (input_view, _) = one(&truth.input)?;
+    let (input_view, input_photo, input_img) = one(&truth.input)?;
+    if truth.views.is_empty() && truth.input.photo.is_some() {
+        // Photo scenes have no novel view: their sheet's first row is the input view.
+        first.0 = input_img;
+    }
     let mut views = Vec::new();
     for (k, v) in truth.views.iter().enumerate() {
-        let (m, img) = one(v)?;
+        let (m, _, img) = one(v)?;
         if k == 0 {
             first.0 = img;
         }
         views.push(m);
     }
     let mut poses = Vec::new();
+    let mut pose_photos = Vec::new();
     for (k, v) in truth.poses.iter().enumerate() {
-        let (m, img) = one(v)?;
+        let (m, photo, img) = one(v)?;
         if k == 0 {
             first.1 = img;
         }
         poses.push(m);
+        pose_photos.extend(photo);
     }
+    let photo = input_photo.map(|input_view| PhotoScores {
+        input_view,
+        novel_poses: mean_photo_metrics(&pose_photos),
+    });
     let texture: TextureErrors = gt_textures
         .map(|gt| texture_errors(&c.textures, gt, visible))
         .unwrap_or_default();
@@ -149,6 +196,7 @@ fn score(
             texture: texture.raw,
             texture_gain_fitted: texture.gain_fitted,
             seconds: 0.0,
+            photo,
         },
         first,
     ))
@@ -178,6 +226,7 @@ type Evaluated = (
     SceneSheets,
     [Vec<bool>; 2],
     (Option<Vec<f32>>, Option<Vec<f32>>),
+    Option<SceneTextures>,
 );
 
 /// Trains and scores `methods` on one synthetic scene. `device` must be an autodiff device;
@@ -217,7 +266,7 @@ pub fn evaluate_scene(
         truth: &|trainer| Truth::new(trainer, scene, &host),
         gt_textures: Some(&scene.textures),
     };
-    let (results, sheets, _, (view, pose)) =
+    let (results, sheets, _, (view, pose), _) =
         evaluate_with(&source, config, baseline, methods, lpips, device, observer)?;
     Ok((
         SceneResult {
@@ -228,6 +277,7 @@ pub fn evaluate_scene(
             iterations: config.iterations,
             stats: scene.stats,
             methods: results,
+            photos: None,
         },
         ContactSheets {
             view,
@@ -256,7 +306,8 @@ pub struct ContactSheets {
 /// in the capture's world, texture-space errors are absent (no true texture exists) and the
 /// Table-3 statistics come from the training view's visible texels. `trainer` builds a
 /// fresh trainer on the training view for a configuration; `id` names the scene in the
-/// results.
+/// results. Also returns BiTT's textures when it was among the methods (or trained for
+/// HTML).
 #[allow(clippy::too_many_arguments)]
 pub fn evaluate_real_scene(
     scene: &RealScene,
@@ -268,7 +319,7 @@ pub fn evaluate_real_scene(
     lpips: Option<&LpipsVgg>,
     device: &Device,
     observer: &mut dyn Observer,
-) -> Result<(SceneResult, ContactSheets), BittError> {
+) -> Result<(SceneResult, ContactSheets, Option<SceneTextures>), BittError> {
     let host = device.clone().inner();
     if methods.contains(&Method::BittRefined) {
         return Err(BittError::Invalid(
@@ -283,7 +334,7 @@ pub fn evaluate_real_scene(
         truth: &|t| Truth::real(t, scene, &host),
         gt_textures: None,
     };
-    let (results, sheets, visible, (view, pose)) =
+    let (results, sheets, visible, (view, pose), textures) =
         evaluate_with(&source, config, baseline, methods, lpips, device, observer)?;
     let stats = TexelStats::from_masks(&visible[0], &visible[1])
         .map_err(|e| BittError::Invalid(format!("texel statistics: {e}")))?;
@@ -296,12 +347,14 @@ pub fn evaluate_real_scene(
             iterations: config.iterations,
             stats,
             methods: results,
+            photos: None,
         },
         ContactSheets {
             view,
             pose,
             methods: sheets,
         },
+        textures,
     ))
 }
 
@@ -328,6 +381,7 @@ fn evaluate_with(
     }
     trainings.sort();
     let mut context: Option<(Trainer, Truth, [Vec<bool>; 2])> = None;
+    let mut bitt_textures = None;
     for m in trainings {
         let cfg = m.bitt_config(config).expect("BiTT variant");
         let started = Instant::now();
@@ -349,6 +403,9 @@ fn evaluate_with(
             avatar.visible[1].iter().map(|&v| v > 0.5).collect(),
         ];
         let truth = (source.truth)(&trainer)?;
+        if m == Method::Bitt {
+            bitt_textures = Some((avatar.fine.clone(), visible.clone()));
+        }
         let mut candidates = Vec::new();
         if methods.contains(&m) {
             candidates.push((m, avatar.fine.clone(), seconds));
@@ -405,5 +462,5 @@ fn evaluate_with(
         results.insert(method, s);
         sheets.push((method, sheet));
     }
-    Ok((results, sheets, visible, truth.firsts()))
+    Ok((results, sheets, visible, truth.firsts(), bitt_textures))
 }

@@ -13,7 +13,9 @@
 //! averages scene results and pairs methods scene by scene, `markdown.rs` writes
 //! `results.md` with the claims, `folder.rs` keeps an evaluation's folder (result files per
 //! scene and setting, shards, resume, merging), `scenes.rs` runs an evaluation's scenes one
-//! after another (synthetic or InterHand2.6M, this shard's, skipping finished ones).
+//! after another (synthetic or InterHand2.6M, this shard's, skipping finished ones),
+//! `photos.rs` the real-photo benchmark (`--photos`: each photo the input once, the others
+//! its novel poses, scored in the photos' own hand masks).
 
 use std::collections::BTreeMap;
 
@@ -28,18 +30,24 @@ mod aggregate;
 mod folder;
 mod markdown;
 mod methods;
+mod photos;
 mod scenes;
 
 pub use aggregate::{MeanMetrics, MethodSummary, Paired, Summary, TexelStatsMean, summarize};
 pub use folder::{
-    EvalPlan, interhand_scene_id, merge, parse_scenes, parse_shard, pending, prepare_folder,
-    result_path, shard_seeds, trainings_per_scene, write_scene, write_sheet,
+    EvalPlan, interhand_scene_id, merge, parse_scenes, parse_shard, pending, photo_scene_id,
+    prepare_folder, result_path, shard_seeds, trainings_per_scene, write_scene, write_sheet,
 };
-pub use markdown::{claims, results_markdown};
+pub use markdown::{claims, photos_markdown, results_markdown};
 pub use methods::{ContactSheets, SceneSheets, SheetImages, evaluate_real_scene, evaluate_scene};
+pub use photos::{
+    Photo, PhotoConsistency, PhotoMetrics, PhotoNames, PhotoScores, SceneTextures,
+    mean_photo_metrics, photo_consistency, photo_metrics, photo_scenes, read_scene_textures,
+    require_photo_files, scene_textures_path, write_scene_textures,
+};
 pub use scenes::{
-    EvalObserver, EvalRun, EvalSource, Evaluation, InterHandScenes, evaluate_interhand,
-    evaluate_synthetic, run_evaluation,
+    EvalObserver, EvalRun, EvalSource, Evaluation, InterHandScenes, PhotoScenes,
+    evaluate_interhand, evaluate_photos, evaluate_synthetic, run_evaluation,
 };
 
 /// A method of the comparison (Tables 1 and 4).
@@ -214,6 +222,9 @@ pub struct MethodScores {
     pub texture_gain_fitted: TexelErrors,
     /// Seconds spent training it (shared trainings are counted once, on the first method).
     pub seconds: f64,
+    /// Photo scenes (`--photos`): the scores in each photo's own hand mask.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub photo: Option<PhotoScores>,
 }
 
 /// Every method's scores on one scene and mesh setting.
@@ -233,6 +244,9 @@ pub struct SceneResult {
     pub stats: TexelStats,
     /// Scores per method.
     pub methods: BTreeMap<Method, MethodScores>,
+    /// Photo scenes (`--photos`): the photo trained on and those scored.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub photos: Option<PhotoNames>,
 }
 
 /// The `format` of a [`SceneResult`] file.

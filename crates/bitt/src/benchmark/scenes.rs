@@ -12,10 +12,11 @@ use bitt_texture::FitProgress;
 use burn::tensor::Device;
 
 use super::folder::{
-    EvalPlan, interhand_scene_id, merge, pending, prepare_folder, result_path, shard_seeds,
-    trainings_per_scene, write_scene,
+    EvalPlan, interhand_scene_id, merge, pending, photo_scene_id, prepare_folder, result_path,
+    shard_seeds, trainings_per_scene, write_scene,
 };
 use super::methods::{evaluate_real_scene, evaluate_scene};
+use super::photos::{Photo, PhotoNames, photo_scenes, require_photo_files, write_scene_textures};
 use super::{MeshSetting, Method};
 use crate::BittError;
 use crate::baselines::BaselineConfig;
@@ -129,6 +130,15 @@ pub fn evaluate_synthetic(
     Ok(())
 }
 
+/// Real scenes have no true meshes to perturb: refuses a run whose settings leave out the
+/// given meshes, saying `why`.
+fn require_given_meshes(run: &EvalRun<'_>, why: &str) -> Result<(), BittError> {
+    match run.settings.contains(&MeshSetting::GtMesh) {
+        true => Ok(()),
+        false => Err(BittError::Invalid(why.to_string())),
+    }
+}
+
 /// The InterHand2.6M scenes of an evaluation: the dataset, its split, the hands and texture
 /// prior, and how many captures (`None`: all).
 #[derive(Debug)]
@@ -157,13 +167,11 @@ pub fn evaluate_interhand(
     device: &Device,
     observer: &mut dyn EvalObserver,
 ) -> Result<(), BittError> {
-    if !run.settings.contains(&MeshSetting::GtMesh) {
-        return Err(BittError::Invalid(
-            "--dataset interhand evaluates with the annotated meshes only (Table 1a); the \
-             setting without them needs a mesh estimator such as IntagHand"
-                .into(),
-        ));
-    }
+    require_given_meshes(
+        run,
+        "--dataset interhand evaluates with the annotated meshes only (Table 1a); the setting \
+         without them needs a mesh estimator such as IntagHand",
+    )?;
     let (root, split) = (data.root, data.split);
     let models = load_models(&data.hands, &data.prior)?;
     observer.say(&format!(
@@ -228,7 +236,7 @@ pub fn evaluate_interhand(
                 device,
             )
         };
-        let (result, sheets) = evaluate_real_scene(
+        let (result, sheets, _) = evaluate_real_scene(
             &views,
             id,
             &make,
@@ -252,6 +260,100 @@ pub fn evaluate_interhand(
     Ok(())
 }
 
+/// The photo benchmark's request.
+#[derive(Debug)]
+pub struct PhotoScenes<'a> {
+    /// The photos (two or more, of the same hands).
+    pub photos: &'a [Photo],
+    /// The hand models.
+    pub hands: HandSource,
+    /// The texture prior.
+    pub prior: PriorSource,
+}
+
+/// Evaluates every photo of `data` as the input view (this shard's, skipping those with a
+/// result), scoring the others as its novel poses.
+///
+/// # Errors
+/// A mesh setting other than the given meshes, fewer than two photos, an unreadable photo or
+/// annotation, or training, scoring or writing a scene (naming the photo).
+pub fn evaluate_photos(
+    run: &EvalRun<'_>,
+    data: &PhotoScenes<'_>,
+    device: &Device,
+    observer: &mut dyn EvalObserver,
+) -> Result<(), BittError> {
+    require_given_meshes(
+        run,
+        "--photos evaluates with the given meshes only (--mesh gt-mesh)",
+    )?;
+    let models = load_models(&data.hands, &data.prior)?;
+    let size = run.config.nets.image_size;
+    let scenes = photo_scenes(data.photos, &models, size)?;
+    let (shard, shards) = run.shard;
+    let trainings = trainings_per_scene(run.methods, run.config);
+    let mine: Vec<usize> = (0..scenes.len()).filter(|k| k % shards == shard).collect();
+    observer.plan(mine.len() * trainings * run.config.iterations);
+    let names: Vec<String> = data.photos.iter().map(Photo::name).collect();
+    for k in mine {
+        let (photo, scene) = (&data.photos[k], &scenes[k]);
+        let id = photo_scene_id(&photo.image);
+        let path = result_path(run.out, MeshSetting::GtMesh, id);
+        if path.is_file() {
+            observer.say(&format!(
+                "photo {}: result exists ({}); skipped",
+                photo.image.display(),
+                path.display()
+            ));
+            continue;
+        }
+        let others: Vec<&str> = (0..names.len())
+            .filter(|&j| j != k)
+            .map(|j| names[j].as_str())
+            .collect();
+        observer.scene(format!(
+            "[{}/{}] trained on {}, scored on {}",
+            k + 1,
+            scenes.len(),
+            names[k],
+            others.join(", ")
+        ));
+        let make = |cfg: &TrainConfig| {
+            real_trainer(
+                &scene.train.image,
+                &scene.train.hands,
+                models.clone(),
+                &data.prior,
+                cfg.clone(),
+                Some(run.cache),
+                device,
+            )
+        };
+        let (mut result, sheets, textures) = evaluate_real_scene(
+            scene,
+            id,
+            &make,
+            run.config,
+            run.baseline,
+            run.methods,
+            run.lpips,
+            device,
+            &mut *observer,
+        )
+        .context_with(|| format!("photo {}", photo.image.display()))?;
+        result.photos = Some(PhotoNames {
+            train: names[k].clone(),
+            novel_poses: others.iter().map(|s| s.to_string()).collect(),
+        });
+        if let Some(textures) = &textures {
+            write_scene_textures(run.out, id, textures)?;
+        }
+        write_scene(run.out, &result, &scene.train.image, &sheets, size)?;
+    }
+    observer.say("");
+    Ok(())
+}
+
 /// Where `bitt eval`'s scenes come from.
 #[derive(Debug, Clone, Copy)]
 pub enum EvalSource<'a> {
@@ -269,6 +371,16 @@ pub enum EvalSource<'a> {
         html_dir: Option<&'a Path>,
         /// Every capture with a usable scene, rather than the first `scenes`.
         all: bool,
+    },
+    /// Photos of the same hands (`--photos`): each the input view once, the others its
+    /// novel poses.
+    Photos {
+        /// The photos and their hands.
+        photos: &'a [Photo],
+        /// MANO's folder (`None`: the procedural hands).
+        model_dir: Option<&'a Path>,
+        /// HTML's folder (`None`: the procedural texture PCA).
+        html_dir: Option<&'a Path>,
     },
 }
 
@@ -305,6 +417,14 @@ pub fn run_evaluation(
             "interhand {split} {}",
             root.map_or(String::new(), |r| r.display().to_string())
         ),
+        EvalSource::Photos { photos, .. } => format!(
+            "photos {}",
+            photos
+                .iter()
+                .map(|p| format!("{}:{}", p.image.display(), p.annotation.display()))
+                .collect::<Vec<_>>()
+                .join(" ")
+        ),
     };
     let plan = EvalPlan {
         train: e.run.config,
@@ -314,6 +434,9 @@ pub fn run_evaluation(
         scenes: e.scenes,
         dataset: &dataset,
     };
+    if let EvalSource::Photos { photos, .. } = e.source {
+        require_photo_files(photos)?;
+    }
     prepare_folder(e.run.out, &plan)?;
     let lpips = LpipsVgg::load_or_find(e.lpips, &device.clone().inner())?;
     if lpips.is_none() {
@@ -346,6 +469,19 @@ pub fn run_evaluation(
                 scenes: (!all).then_some(e.scenes),
             };
             evaluate_interhand(&run, &data, device, observer)?;
+        }
+        EvalSource::Photos {
+            photos,
+            model_dir,
+            html_dir,
+        } => {
+            let (hands, prior) = sources(model_dir, html_dir);
+            let data = PhotoScenes {
+                photos,
+                hands,
+                prior,
+            };
+            evaluate_photos(&run, &data, device, observer)?;
         }
     }
     merge(&[e.run.out.to_path_buf()])

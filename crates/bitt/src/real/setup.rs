@@ -14,7 +14,7 @@ use super::{
 use crate::BittError;
 use crate::assets::{HandAssets, ViewGeometry};
 use crate::config::TrainConfig;
-use crate::refine::{MeshRefine, Refinement, refine_view};
+use crate::refine::{MeshRefine, Refinement, refine_view, threshold_mask};
 use crate::trainer::Trainer;
 
 /// What every fresh real run's setup shares ([`annotation_setup`], [`keypoint_setup`],
@@ -138,7 +138,15 @@ pub fn refined_real_trainer(
         None => None,
     };
     let geometry = ViewGeometry::new(&assets, hands, device)?;
-    let trainer = Trainer::new(config, assets, &pca, geometry, view_image, None, device)?;
+    let threshold = config.loss.photo_mask;
+    let mut trainer = Trainer::new(config, assets, &pca, geometry, view_image, None, device)?;
+    if threshold > 0.0 {
+        let keep: Vec<bool> = threshold_mask(view_image, s * s, threshold as f32)
+            .iter()
+            .map(|&m| m > 0.5)
+            .collect();
+        trainer.view.trust_photo(&keep)?;
+    }
     Ok((trainer, refinement))
 }
 

@@ -10,8 +10,8 @@ use burn::tensor::Device;
 
 use super::{
     MASK_THRESHOLD, RefineConfig, RefineObserver, Refinement, SPECK_FRACTION,
-    drop_small_components, overlay, overlay_scale, refine_synthetic, refine_view, silhouette,
-    threshold_mask, vertex_error_px,
+    drop_small_components, holes, overlay, overlay_scale, refine_synthetic, refine_view,
+    silhouette, threshold_mask, vertex_error_px,
 };
 use crate::BittError;
 use crate::assets::HandAssets;
@@ -93,14 +93,17 @@ impl SceneRefinement {
     }
 }
 
-/// Refines the given meshes of a synthetic scene at `train`'s image size with `train`'s
-/// procedural texture prior (cached in `cache`), and scores them against the true meshes.
+/// Refines the given meshes of a synthetic scene at `size` x `size` (`None`: the scene's own
+/// image size; refining a 256 px scene at 128 left twice the vertex error on scenes the
+/// refinement was not tuned on, `docs/refinement.md`) with `train`'s procedural texture
+/// prior (cached in `cache`), and scores them against the true meshes.
 ///
 /// # Errors
 /// As [`refine_synthetic`].
 pub fn refine_scene(
     scene: &SynthScene,
     train: &TrainConfig,
+    size: Option<usize>,
     config: &RefineConfig,
     cache: Option<&Path>,
     device: &Device,
@@ -112,7 +115,7 @@ pub fn refine_scene(
         scene,
         &assets,
         &pca,
-        train.nets.image_size,
+        size.unwrap_or(scene.given.camera.width.max(scene.given.camera.height) as usize),
         config,
         device,
         observer,
@@ -183,6 +186,11 @@ pub struct PhotoRefinement {
     pub iou_before: f64,
     /// ... of the refined hands.
     pub iou_after: f64,
+    /// Holes ([`super::holes`]) of the given hands in the mask, at the photo's size: the
+    /// fraction of mask pixels inside the hands' outline that no mesh covers.
+    pub holes_before: f64,
+    /// ... of the refined hands.
+    pub holes_after: f64,
     /// Where the mask came from (`--mask FILE` or the threshold rule).
     pub mask_source: String,
     /// The photo with outlines before (red) and after (green), and its `[H, W]`.
@@ -223,6 +231,12 @@ impl PhotoRefinement {
             "silhouette IoU against the mask ({}): {:.4} before, {:.4} after; {:.1} s at {size}x{size}",
             self.mask_source, self.iou_before, self.iou_after, self.refinement.report.seconds
         ));
+        lines.push(format!(
+            "holes (mask pixels inside the hands' outline that no mesh covers): {:.2}% before, \
+             {:.2}% after",
+            100.0 * self.holes_before,
+            100.0 * self.holes_after
+        ));
         lines
     }
 
@@ -233,6 +247,7 @@ impl PhotoRefinement {
             "report": self.refinement.report,
             "mask": self.mask_source,
             "silhouette_iou_vs_mask": {"before": self.iou_before, "after": self.iou_after},
+            "holes_vs_mask": {"before": self.holes_before, "after": self.holes_after},
         })
     }
 }
@@ -378,12 +393,19 @@ pub fn refine_photo_hands(
     refinement.hands.camera = scene.camera;
     refinement.initial.camera = scene.camera;
     let models = &assets.models;
-    let iou = |s: &TwoHandScene| -> Result<f64, BittError> {
-        Ok(mask_iou(&silhouette(models, s, &assets.scene)?, &full_mask))
+    let hand: Vec<bool> = full_mask.iter().map(|&m| m > 0.5).collect();
+    let score = |s: &TwoHandScene| -> Result<(f64, f64), BittError> {
+        let drawn = silhouette(models, s, &assets.scene)?;
+        let on: Vec<bool> = drawn.iter().map(|&m| m > 0.5).collect();
+        Ok((mask_iou(&drawn, &full_mask), holes(&on, &hand, [h, w])))
     };
+    let ((iou_before, holes_before), (iou_after, holes_after)) =
+        (score(scene)?, score(&refinement.hands)?);
     Ok(PhotoRefinement {
-        iou_before: iou(scene)?,
-        iou_after: iou(&refinement.hands)?,
+        iou_before,
+        iou_after,
+        holes_before,
+        holes_after,
         mask_source,
         overlay: overlay(
             &pixels,

@@ -233,37 +233,19 @@ pub fn threshold_mask(image: &[f32], hw: usize, threshold: f32) -> Vec<f32> {
 pub fn drop_small_components(mask: &[f32], [h, w]: [usize; 2], min_fraction: f64) -> Vec<f32> {
     let mut label = vec![u32::MAX; h * w];
     let mut sizes: Vec<usize> = Vec::new();
-    let mut stack = Vec::new();
     for start in 0..h * w {
         if mask[start] <= 0.5 || label[start] != u32::MAX {
             continue;
         }
         let id = sizes.len() as u32;
-        let mut size = 0usize;
         label[start] = id;
-        stack.push(start);
-        while let Some(p) = stack.pop() {
-            size += 1;
-            let (x, y) = (p % w, p / w);
-            let mut visit = |q: usize| {
-                if mask[q] > 0.5 && label[q] == u32::MAX {
-                    label[q] = id;
-                    stack.push(q);
-                }
-            };
-            if x > 0 {
-                visit(p - 1);
+        let size = flood4([h, w], vec![start], |q| {
+            let enter = mask[q] > 0.5 && label[q] == u32::MAX;
+            if enter {
+                label[q] = id;
             }
-            if x + 1 < w {
-                visit(p + 1);
-            }
-            if y > 0 {
-                visit(p - w);
-            }
-            if y + 1 < h {
-                visit(p + w);
-            }
-        }
+            enter
+        });
         sizes.push(size);
     }
     let largest = sizes.iter().copied().max().unwrap_or(0) as f64;
@@ -274,6 +256,31 @@ pub fn drop_small_components(mask: &[f32], [h, w]: [usize; 2], min_fraction: f64
             if keep { 1.0 } else { 0.0 }
         })
         .collect()
+}
+
+/// A 4-connected flood fill over an `[h, w]` grid from `seeds` (already taken by the
+/// caller): each neighbour `q` of a taken pixel is offered to `enter`, which takes it (and
+/// marks it, so it is not offered as taken again) by returning true. Returns how many pixels
+/// were taken, seeds included.
+fn flood4([h, w]: [usize; 2], seeds: Vec<usize>, mut enter: impl FnMut(usize) -> bool) -> usize {
+    let mut stack = seeds;
+    let mut taken = 0;
+    while let Some(p) = stack.pop() {
+        taken += 1;
+        let (x, y) = (p % w, p / w);
+        let neighbours = [
+            (x > 0).then(|| p - 1),
+            (x + 1 < w).then(|| p + 1),
+            (y > 0).then(|| p - w),
+            (y + 1 < h).then(|| p + w),
+        ];
+        for q in neighbours.into_iter().flatten() {
+            if enter(q) {
+                stack.push(q);
+            }
+        }
+    }
+    taken
 }
 
 impl RefineTarget {
@@ -1270,9 +1277,111 @@ pub fn vertex_error_px(
     Ok(a.projected_distance_px(b, models)?)
 }
 
+/// The outline's closing radius at 256 px: gaps between touching fingers narrower than
+/// twice this count as inside the hands.
+pub const OUTLINE_CLOSING_PX_AT_256: f64 = 3.0;
+
+/// The hands' outline `[h, w]` of a rendered silhouette: a morphological closing (square,
+/// `radius` pixels) that bridges slits between touching parts, then every region it encloses
+/// (not reachable from the image border through pixels outside it) filled.
+pub fn outline(rendered: &[bool], [h, w]: [usize; 2], radius: usize) -> Vec<bool> {
+    let shift = |m: &[bool], grow: bool| -> Vec<bool> {
+        // Separable square dilation (grow) or erosion (shrink).
+        let r = radius as isize;
+        let pass = |src: &[bool], horizontal: bool| -> Vec<bool> {
+            let mut out = vec![false; h * w];
+            for y in 0..h as isize {
+                for x in 0..w as isize {
+                    let mut acc = !grow;
+                    for d in -r..=r {
+                        let (xx, yy) = if horizontal { (x + d, y) } else { (x, y + d) };
+                        let v = if xx < 0 || yy < 0 || xx >= w as isize || yy >= h as isize {
+                            !grow
+                        } else {
+                            src[yy as usize * w + xx as usize]
+                        };
+                        if grow {
+                            acc |= v;
+                        } else {
+                            acc &= v;
+                        }
+                    }
+                    out[y as usize * w + x as usize] = acc;
+                }
+            }
+            out
+        };
+        pass(&pass(m, true), false)
+    };
+    let closed = shift(&shift(rendered, true), false);
+    // Flood the outside from the border.
+    let mut outside = vec![false; h * w];
+    let seeds: Vec<usize> = (0..h * w)
+        .filter(|&p| {
+            let (y, x) = (p / w, p % w);
+            (y == 0 || x == 0 || y == h - 1 || x == w - 1) && !closed[p]
+        })
+        .collect();
+    for &p in &seeds {
+        outside[p] = true;
+    }
+    flood4([h, w], seeds, |q| {
+        let enter = !outside[q] && !closed[q];
+        outside[q] |= enter;
+        enter
+    });
+    outside.iter().map(|&o| !o).collect()
+}
+
+/// Holes: the fraction of the photo's hand pixels `hand` `[h, w]` inside the hands' outline
+/// ([`outline`] of the silhouette `drawn`, closed by [`OUTLINE_CLOSING_PX_AT_256`] scaled to
+/// the image) that the silhouette leaves uncovered: skin between and within the hands that no
+/// mesh shows. 0 when no hand pixel lies inside.
+pub fn holes(drawn: &[bool], hand: &[bool], [h, w]: [usize; 2]) -> f64 {
+    let radius = (OUTLINE_CLOSING_PX_AT_256 * h.max(w) as f64 / 256.0)
+        .round()
+        .max(1.0) as usize;
+    let inside = outline(drawn, [h, w], radius);
+    let (mut inner, mut uncovered) = (0usize, 0usize);
+    for p in 0..h * w {
+        if hand[p] && inside[p] {
+            inner += 1;
+            uncovered += usize::from(!drawn[p]);
+        }
+    }
+    if inner == 0 {
+        0.0
+    } else {
+        uncovered as f64 / inner as f64
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn outline_bridges_slits_and_fills_enclosed_gaps() {
+        // A 12 x 12 ring with a one-pixel slit in its wall: the closing bridges the slit, the
+        // fill takes the inside.
+        let (h, w) = (12, 12);
+        let mut m = vec![false; h * w];
+        for y in 2..10 {
+            for x in 2..10 {
+                if y == 2 || y == 9 || x == 2 || x == 9 {
+                    m[y * w + x] = true;
+                }
+            }
+        }
+        m[2 * w + 5] = false; // the slit
+        let o = outline(&m, [h, w], 1);
+        assert!(o[5 * w + 5], "the inside is inside");
+        assert!(o[2 * w + 5], "the slit is inside");
+        assert!(!o[0] && !o[11 * w + 11], "corners stay outside");
+        // Without the closing the slit opens the ring.
+        let open = outline(&m, [h, w], 0);
+        assert!(!open[5 * w + 5]);
+    }
 
     #[test]
     fn distance_transform_is_exact_on_small_masks() {
