@@ -106,6 +106,10 @@ pub struct ProceduralHandConfig {
     pub wrist_width: f64,
     /// Thickness of the wrist.
     pub wrist_thickness: f64,
+    /// How far the dome that closes the wrist end reaches out, as a fraction of the wrist's
+    /// thickness (0.5: a half-round profile across the wrist; the former 0.22 read as a flat
+    /// stump in renders, issue 34).
+    pub wrist_cap_depth: f64,
     /// Phalanx lengths of the index, middle, ring and pinky fingers: MCP to PIP, PIP to DIP,
     /// DIP to the fingertip.
     pub finger_lengths: [[f64; 3]; 4],
@@ -134,6 +138,7 @@ impl Default for ProceduralHandConfig {
             palm_thickness: 0.026,
             wrist_width: 0.058,
             wrist_thickness: 0.038,
+            wrist_cap_depth: 0.5,
             finger_lengths: [
                 [0.041, 0.025, 0.023],
                 [0.045, 0.028, 0.024],
@@ -171,6 +176,7 @@ impl ProceduralHandConfig {
         c.palm_thickness = clamp(c.palm_thickness, d.palm_thickness, 0.6, 1.6);
         c.wrist_width = clamp(c.wrist_width, d.wrist_width, 0.6, 1.6);
         c.wrist_thickness = clamp(c.wrist_thickness, d.wrist_thickness, 0.6, 1.6);
+        c.wrist_cap_depth = clamp(c.wrist_cap_depth, d.wrist_cap_depth, 0.2, 2.0);
         for (lengths, defaults) in c.finger_lengths.iter_mut().zip(d.finger_lengths) {
             for (l, dl) in lengths.iter_mut().zip(defaults) {
                 *l = clamp(*l, dl, 0.5, 2.0);

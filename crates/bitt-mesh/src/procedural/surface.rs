@@ -519,7 +519,7 @@ impl<'a> PalmShape<'a> {
     fn wrist_cap(&self, b: &mut Builder, first: &[(DVec3, Vec<Anchor>)]) -> Vec<Row> {
         let count = (self.n() / 8).max(2);
         let centre = first.iter().map(|p| p.0).sum::<DVec3>() / first.len() as f64;
-        let depth = 0.22 * self.cfg.wrist_thickness;
+        let depth = self.cfg.wrist_cap_depth * self.cfg.wrist_thickness;
         let pole_anchor = Anchor {
             chain: 1,
             s: self.lobes[1].wrist_s,

@@ -875,3 +875,36 @@ fn renders_show_no_back_faces() {
         render_uv(&m, 1024).save(dir.join("hand_uv.png")).unwrap();
     }
 }
+
+/// The wrist ends in a rounded dome, not a flat stump (issue 34): the end reaches half the
+/// wrist's thickness beyond the plane of the wrist joint (where the palm's first ring lies),
+/// a half-round profile across the wrist; the former cap reached 0.22 of it, an ellipse flat
+/// enough to read as a cut in renders. Every cap vertex stays within the palm's first ring's
+/// outline seen along the arm (the dome does not bulge sideways).
+#[test]
+fn the_wrist_end_is_rounded() {
+    let cfg = ProceduralHandConfig::default();
+    let m = procedural_hand(Side::Right, &cfg);
+    let wrist = cfg.wrist_position.x;
+    let reach = m.v_template.iter().map(|p| p.x - wrist).fold(0.0, f64::max);
+    assert!(
+        (reach - 0.5 * cfg.wrist_thickness).abs() < 1e-9,
+        "the wrist end reaches {reach} m (thickness {})",
+        cfg.wrist_thickness
+    );
+    let ring: Vec<&DVec3> = m
+        .v_template
+        .iter()
+        .filter(|p| (p.x - wrist).abs() < 1e-9)
+        .collect();
+    let (ymax, zmax) = ring.iter().fold((0.0f64, 0.0f64), |(y, z), p| {
+        (
+            y.max((p.y - cfg.wrist_position.y).abs()),
+            z.max((p.z - cfg.wrist_position.z).abs()),
+        )
+    });
+    for p in m.v_template.iter().filter(|p| p.x - wrist > 1e-9) {
+        assert!((p.y - cfg.wrist_position.y).abs() <= ymax + 1e-9, "{p}");
+        assert!((p.z - cfg.wrist_position.z).abs() <= zmax + 1e-9, "{p}");
+    }
+}

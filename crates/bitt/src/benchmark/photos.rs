@@ -261,8 +261,9 @@ pub struct PhotoConsistency {
     pub l1_gain_fitted: Option<f64>,
 }
 
-/// Every pair of photo scenes in `results` whose textures are in `out`: how far their BiTT
-/// textures differ on the texels both photos show. Pairs without texture files are skipped.
+/// Every pair of photo scenes in `results` whose textures are in `out` (in the order of their
+/// photos' names): how far their BiTT textures differ on the texels both photos show. Pairs
+/// without texture files are skipped.
 ///
 /// # Errors
 /// A corrupt texture file.
@@ -278,6 +279,7 @@ pub fn photo_consistency(
             scenes.push((names.train.clone(), read_scene_textures(&path)?));
         }
     }
+    scenes.sort_by(|a, b| a.0.cmp(&b.0));
     let mut pairs = Vec::new();
     for i in 0..scenes.len() {
         for j in i + 1..scenes.len() {

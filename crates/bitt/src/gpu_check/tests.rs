@@ -165,7 +165,7 @@ fn cheap_stages_agree_on_flex() {
     assert_eq!(r.data["face_ids_differing"], 0);
     assert_eq!(r.data["image"], serde_json::json!([256, 256]));
     // The demo scene's hands at 256x256 (the README's render benchmark counts the same).
-    assert_eq!(r.data["covered_pixels"], 16_544);
+    assert_eq!(r.data["covered_pixels"], 17_410);
     // The host path reads the clip positions back once.
     assert_eq!(r.data["host_readbacks"], 1);
 }
@@ -184,5 +184,5 @@ fn the_dense_rasterizer_stage_runs_the_kernel_on_wgpu_without_readbacks() {
     assert_eq!(r.data["host_reason"], serde_json::Value::Null);
     assert_eq!(r.data["host_readbacks"], 0);
     assert_eq!(r.data["face_ids_differing"], 0);
-    assert_eq!(r.data["covered_pixels"], 16_544);
+    assert_eq!(r.data["covered_pixels"], 17_410);
 }
