@@ -36,7 +36,8 @@ use crate::{
 ///
 /// - 1: first release.
 /// - 2: personal appearance patches ([`crate::AppearancePatch`]) on both hands.
-pub const GENERATOR_VERSION: u32 = 2;
+/// - 3: the procedural hand's rounder wrist cap (issue 34).
+pub const GENERATOR_VERSION: u32 = 3;
 
 /// The `format` of `scene.json` and `data.safetensors`.
 const FORMAT: &str = "bitt-synth-scene";

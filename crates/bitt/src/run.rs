@@ -143,7 +143,13 @@ pub fn texture_prior_with_progress(
     progress: &dyn FitProgress,
 ) -> Result<TexturePca, BittError> {
     let key = {
-        let text = serde_json::to_string(&config.texture).unwrap_or_default();
+        // The PCA is fitted on skins generated over the procedural hand's surface: a change
+        // of that surface (the synthetic generator's version) changes the fit.
+        let text = format!(
+            "{}|{}",
+            serde_json::to_string(&config.texture).unwrap_or_default(),
+            bitt_synth::GENERATOR_VERSION
+        );
         let mut h: u64 = 0xcbf2_9ce4_8422_2325;
         for b in text.bytes() {
             h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
@@ -153,10 +159,15 @@ pub fn texture_prior_with_progress(
     if let Some(dir) = cache_dir {
         let path = dir.join(&key);
         if path.is_file() {
-            match TexturePca::load_safetensors(&path) {
-                Ok(p) => return Ok(p),
-                Err(_) => {
-                    // A corrupt cache entry is refitted and overwritten below.
+            // A corrupt entry, or one fitted on another layout of the procedural hands (a
+            // cache from before a change of their surface), is refitted and overwritten below.
+            if let Ok(p) = TexturePca::load_safetensors(&path) {
+                let assets = crate::assets::HandAssets::new(
+                    bitt_mesh::procedural_pair(),
+                    config.texture.resolution,
+                )?;
+                if p.layout.num_texels() == assets.num_texels() {
+                    return Ok(p);
                 }
             }
         }

@@ -619,3 +619,27 @@ fn an_untrusted_photo_pixel_neither_trains_nor_unwraps() {
     trusted.hand_image = trusted.hand_image.clone().add_scalar(1.0);
     assert!(rec_fine(&trusted) > before + 0.1);
 }
+
+/// A cached texture PCA fitted on another layout (a cache from before the procedural hands'
+/// surface changed) is refitted, not used: using it would hand the trainer and the
+/// refinement a basis of the wrong size.
+#[test]
+fn a_cached_pca_of_another_layout_is_refitted() {
+    let config = TrainConfig::preset(Preset::Tiny);
+    let dir = scratch("stale-pca");
+    let fresh = texture_prior(&config, Some(&dir), &Device::flex()).unwrap();
+    let entries: Vec<std::path::PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(entries.len(), 1, "{entries:?}");
+    // Overwrite the entry with a PCA of another texture size (another layout).
+    let mut other = config.clone();
+    other.texture.resolution *= 2;
+    let stale = texture_prior(&other, None, &Device::flex()).unwrap();
+    assert_ne!(stale.layout.num_texels(), fresh.layout.num_texels());
+    stale.save_safetensors(&entries[0]).unwrap();
+    let again = texture_prior(&config, Some(&dir), &Device::flex()).unwrap();
+    assert_eq!(again.layout.num_texels(), fresh.layout.num_texels());
+    let _ = std::fs::remove_dir_all(&dir);
+}
