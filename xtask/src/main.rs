@@ -48,7 +48,13 @@ use std::process::{Command, ExitStatus};
 use anyhow::{Context, Result, bail};
 
 fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
+    // `cargo run` (what `cargo xtask` is) sets CARGO_MANIFEST_DIR for the process too. Prefer
+    // it to the path baked in at compile time: a binary built from a copy of the repository
+    // elsewhere (CI shares the build cache) would otherwise run in that copy's folder.
+    let manifest = std::env::var_os("CARGO_MANIFEST_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")));
+    manifest
         .parent()
         .map(Path::to_path_buf)
         .unwrap_or_else(|| PathBuf::from("."))
