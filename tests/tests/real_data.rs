@@ -424,7 +424,7 @@ fn demo_frame_trains_with_procedural_hands_if_present() {
         let view = &setup.trainer.view;
         let read = |t: burn::tensor::Tensor<4>| bitt::trainer::read(t.inner()).unwrap();
         let (weight, drawn, image) = (
-            read(view.weight.clone()),
+            read(view.weight.clone().expect("the photo mask applies")),
             read(view.mask.clone()),
             read(view.image.clone()),
         );

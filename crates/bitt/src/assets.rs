@@ -77,6 +77,22 @@ impl HandAssets {
         self.layouts[0].num_texels()
     }
 
+    /// Checks that a texture PCA covers these hands' layout (a prior fitted on another
+    /// layout would give a basis of the wrong size).
+    ///
+    /// # Errors
+    /// [`BittError::Invalid`] naming both texel counts.
+    pub fn check_prior(&self, pca: &bitt_texture::TexturePca) -> Result<(), BittError> {
+        if pca.layout.num_texels() == self.num_texels() {
+            return Ok(());
+        }
+        Err(BittError::Invalid(format!(
+            "the texture PCA covers {} texels, the hands' layout {}",
+            pca.layout.num_texels(),
+            self.num_texels()
+        )))
+    }
+
     /// The compact <-> image index tensors on `device`.
     pub fn gather(&self, device: &Device) -> LayoutGather {
         self.layouts[0].gather(device)

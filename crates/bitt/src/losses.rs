@@ -91,8 +91,13 @@ fn l1<const D: usize>(a: Tensor<D>, b: Tensor<D>) -> Tensor<1> {
 /// - `L_sym = mean |t̂_l - t̂_r|`.
 pub fn loss(outputs: &Outputs, view: &TrainingView, w: &LossWeights) -> Loss {
     let target = view.hand_image.clone();
-    let weight = view.weight.clone();
-    let rec = |render: Tensor<4>| ((render - target.clone()) * weight.clone()).abs().mean();
+    let rec = |render: Tensor<4>| {
+        let diff = render - target.clone();
+        match &view.weight {
+            Some(w) => (diff * w.clone()).abs().mean(),
+            None => diff.abs().mean(),
+        }
+    };
     let rec_fine = rec(outputs.fine_image.clone());
     let rec_coarse = rec(outputs.coarse_image.clone());
     let rec_albedo = rec(outputs.albedo_render.clone());

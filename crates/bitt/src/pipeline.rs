@@ -26,8 +26,9 @@ pub struct TrainingView {
     /// Visible masks `v_i` `[1, 1, T]`, left then right.
     pub visible: [Tensor<3>; 2],
     /// Per-pixel weight of the reconstruction losses, `[1, 1, S, S]`: 1, except 0 where a
-    /// photo's pixel is not trusted ([`TrainingView::trust_photo`]).
-    pub weight: Tensor<4>,
+    /// photo's pixel is not trusted ([`TrainingView::trust_photo`]); `None` (every pixel 1,
+    /// no multiply in the loss) until then.
+    pub weight: Option<Tensor<4>>,
 }
 
 impl TrainingView {
@@ -106,7 +107,7 @@ impl TrainingView {
         Ok(TrainingView {
             geometry,
             image,
-            weight: Tensor::<4>::ones([1, 1, h, w], device),
+            weight: None,
             mask,
             hand_image,
             plans,
@@ -172,7 +173,10 @@ impl TrainingView {
             .zip(keep)
             .map(|(&m, &k)| if m > 0.5 && !k { 0.0 } else { 1.0 })
             .collect();
-        self.weight = Tensor::<4>::from_data(TensorData::new(weight, [1, 1, h, w]), &device);
+        self.weight = Some(Tensor::<4>::from_data(
+            TensorData::new(weight, [1, 1, h, w]),
+            &device,
+        ));
         Ok(PhotoTrust {
             applied: true,
             dropped,

@@ -166,7 +166,7 @@ pub fn texture_prior_with_progress(
                     bitt_mesh::procedural_pair(),
                     config.texture.resolution,
                 )?;
-                if p.layout.num_texels() == assets.num_texels() {
+                if assets.check_prior(&p).is_ok() {
                     return Ok(p);
                 }
             }

@@ -161,13 +161,7 @@ impl Trainer {
         device: &Device,
     ) -> Result<Self, BittError> {
         config.validate()?;
-        if pca.layout.num_texels() != assets.num_texels() {
-            return Err(BittError::Invalid(format!(
-                "the texture PCA covers {} texels, the hands' layout {}",
-                pca.layout.num_texels(),
-                assets.num_texels()
-            )));
-        }
+        assets.check_prior(pca)?;
         if pca.num_components != config.nets.html.coefficients_per_hand {
             return Err(BittError::Invalid(format!(
                 "the texture PCA has {} components, the HTML network predicts {}",

@@ -6,6 +6,7 @@
 
 use std::path::Path;
 
+use bitt_mesh::HandPair;
 use bitt_mesh::interhand::{InterHandDataset, InterHandSelection};
 use bitt_synth::{MeshNoise, SynthConfig};
 use bitt_texture::FitProgress;
@@ -15,15 +16,19 @@ use super::folder::{
     EvalPlan, interhand_scene_id, merge, pending, photo_scene_id, prepare_folder, result_path,
     shard_seeds, trainings_per_scene, write_scene,
 };
-use super::methods::{evaluate_real_scene, evaluate_scene};
-use super::photos::{Photo, PhotoNames, photo_scenes, require_photo_files, write_scene_textures};
-use super::{MeshSetting, Method};
+use super::methods::{ContactSheets, evaluate_real_scene, evaluate_scene};
+use super::photos::{
+    Photo, PhotoNames, SceneTextures, photo_scenes, require_photo_files, write_scene_textures,
+};
+use super::{MeshSetting, Method, SceneResult};
 use crate::BittError;
 use crate::baselines::BaselineConfig;
 use crate::config::TrainConfig;
 use crate::error::WithContext;
 use crate::lpips::LpipsVgg;
-use crate::real::{HandSource, PriorSource, interhand_views, load_models, real_trainer, sources};
+use crate::real::{
+    HandSource, PriorSource, RealScene, interhand_views, load_models, real_trainer, sources,
+};
 use crate::run::texture_prior_with_progress;
 use crate::trainer::Observer;
 
@@ -139,6 +144,41 @@ fn require_given_meshes(run: &EvalRun<'_>, why: &str) -> Result<(), BittError> {
     }
 }
 
+/// [`evaluate_real_scene`] of a real scene with fresh trainers on its training view (the
+/// InterHand2.6M and photo evaluations).
+fn real_scene(
+    run: &EvalRun<'_>,
+    scene: &RealScene,
+    id: u64,
+    models: &HandPair,
+    prior: &PriorSource,
+    device: &Device,
+    observer: &mut dyn EvalObserver,
+) -> Result<(SceneResult, ContactSheets, Option<SceneTextures>), BittError> {
+    let make = |cfg: &TrainConfig| {
+        real_trainer(
+            &scene.train.image,
+            &scene.train.hands,
+            models.clone(),
+            prior,
+            cfg.clone(),
+            Some(run.cache),
+            device,
+        )
+    };
+    evaluate_real_scene(
+        scene,
+        id,
+        &make,
+        run.config,
+        run.baseline,
+        run.methods,
+        run.lpips,
+        device,
+        observer,
+    )
+}
+
 /// The InterHand2.6M scenes of an evaluation: the dataset, its split, the hands and texture
 /// prior, and how many captures (`None`: all).
 #[derive(Debug)]
@@ -225,25 +265,12 @@ pub fn evaluate_interhand(
             "[{}] capture {capture} frame {frame} cam {camera}",
             k + 1
         ));
-        let make = |cfg: &TrainConfig| {
-            real_trainer(
-                &views.train.image,
-                &views.train.hands,
-                models.clone(),
-                &data.prior,
-                cfg.clone(),
-                Some(run.cache),
-                device,
-            )
-        };
-        let (result, sheets, _) = evaluate_real_scene(
+        let (result, sheets, _) = real_scene(
+            run,
             &views,
             id,
-            &make,
-            run.config,
-            run.baseline,
-            run.methods,
-            run.lpips,
+            &models,
+            &data.prior,
             device,
             &mut *observer,
         )
@@ -318,29 +345,9 @@ pub fn evaluate_photos(
             names[k],
             others.join(", ")
         ));
-        let make = |cfg: &TrainConfig| {
-            real_trainer(
-                &scene.train.image,
-                &scene.train.hands,
-                models.clone(),
-                &data.prior,
-                cfg.clone(),
-                Some(run.cache),
-                device,
-            )
-        };
-        let (mut result, sheets, textures) = evaluate_real_scene(
-            scene,
-            id,
-            &make,
-            run.config,
-            run.baseline,
-            run.methods,
-            run.lpips,
-            device,
-            &mut *observer,
-        )
-        .context_with(|| format!("photo {}", photo.image.display()))?;
+        let (mut result, sheets, textures) =
+            real_scene(run, scene, id, &models, &data.prior, device, &mut *observer)
+                .context_with(|| format!("photo {}", photo.image.display()))?;
         result.photos = Some(PhotoNames {
             train: names[k].clone(),
             novel_poses: others.iter().map(|s| s.to_string()).collect(),

@@ -1018,13 +1018,7 @@ pub fn refine_view(
     observer: &mut dyn RefineObserver,
     what: &str,
 ) -> Result<Refinement, BittError> {
-    if pca.layout.num_texels() != assets.num_texels() {
-        return Err(BittError::Invalid(format!(
-            "the texture PCA covers {} texels, the hands' layout {}",
-            pca.layout.num_texels(),
-            assets.num_texels()
-        )));
-    }
+    assets.check_prior(pca)?;
     let target = RefineTarget::new(image.to_vec(), mask, hands.camera, what)?;
     let appearance = Appearance::Prior(pca.to_device(device));
     refine_hands(
