@@ -126,6 +126,34 @@ impl LightParams {
             location: x.clone().narrow(1, 9, 3),
         }
     }
+
+    /// The same light with one colour: the colour of the three parts together,
+    /// `c = (ambient + diffuse + specular) / mean(ambient + diffuse + specular)`, and each
+    /// part keeps only its mean as an intensity of it (`ambient' = c * mean(ambient)`, the
+    /// same for diffuse and specular).
+    ///
+    /// Not from the paper, which gives each part its own colour. A photograph's colour cast
+    /// is one colour (the camera's white balance and one light rig), and with three colours
+    /// the networks explain it by a diffuse colour unlike the ambient one: the albedo then
+    /// takes the opposite tint wherever the diffuse part was strong in the photo, and shows
+    /// it as a blotch wherever a new pose turns that skin away from the light (issue 34).
+    /// The colour comes from all three parts because a part pushed to the end of its range
+    /// (the ambient one, on the demo photos) has no gradient left to change its colour.
+    /// The real-photo trainer uses this (`loss.photo_light`); synthetic scenes keep the paper's.
+    ///
+    /// # Shapes
+    /// - every part `[B, 3]`, unchanged
+    pub fn one_colour(self) -> LightParams {
+        let mean = |t: &Tensor<2>| t.clone().mean_dim(1);
+        let sum = self.ambient.clone() + self.diffuse.clone() + self.specular.clone();
+        let colour = sum.clone() / mean(&sum);
+        LightParams {
+            ambient: colour.clone() * mean(&self.ambient),
+            diffuse: colour.clone() * mean(&self.diffuse),
+            specular: colour * mean(&self.specular),
+            location: self.location,
+        }
+    }
 }
 
 #[cfg(test)]
@@ -164,5 +192,38 @@ mod tests {
             1e-6,
             "location",
         );
+    }
+
+    #[test]
+    fn one_colour_keeps_the_mean_intensities_in_one_colour() {
+        let device = Device::flex();
+        let raw = Tensor::<2>::from_floats(
+            [[
+                0.9f32, 0.2, -0.4, -1.0, 2.0, -1.0, 0.0, 0.5, 1.0, 0.3, -0.2, 0.1,
+            ]],
+            &device,
+        );
+        let p = LightParams::from_raw(raw);
+        let (a, d, s) = (
+            to_vec(p.ambient.clone()),
+            to_vec(p.diffuse.clone()),
+            to_vec(p.specular.clone()),
+        );
+        let location = to_vec(p.location.clone());
+        let one = p.one_colour();
+        let mean = |v: &[f32]| v.iter().sum::<f32>() / 3.0;
+        let sum: Vec<f32> = (0..3).map(|c| a[c] + d[c] + s[c]).collect();
+        let scaled =
+            |v: &[f32]| -> Vec<f32> { sum.iter().map(|c| c / mean(&sum) * mean(v)).collect() };
+        assert_close(&to_vec(one.ambient.clone()), &scaled(&a), 1e-6, "ambient");
+        assert_close(&to_vec(one.diffuse.clone()), &scaled(&d), 1e-6, "diffuse");
+        assert_close(&to_vec(one.specular), &scaled(&s), 1e-6, "specular");
+        assert_close(&to_vec(one.location), &location, 0.0, "location");
+        // Ambient and diffuse now share one chromaticity, and keep their mean intensity.
+        let (aa, dd) = (to_vec(one.ambient), to_vec(one.diffuse));
+        for c in 0..3 {
+            assert!((dd[c] / dd[0] - aa[c] / aa[0]).abs() < 1e-5);
+        }
+        assert!((mean(&dd) - mean(&d)).abs() < 1e-6);
     }
 }

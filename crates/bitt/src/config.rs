@@ -95,6 +95,14 @@ pub struct LossWeights {
     /// from going into the albedo (issue 34).
     #[serde(default = "photo_mask_default")]
     pub photo_mask: f64,
+    /// Real photos only: the estimated light has one colour (that of its three parts
+    /// together), each part an intensity of it (`LightParams::one_colour`). `false`
+    /// gives each part its own colour, as the paper does. Not from the paper: with three
+    /// colours the demo photos' green cast went into a green diffuse light over a grey
+    /// ambient one, and the albedo took a purple tint that shows as bruise-like blotches at
+    /// novel poses (issue 34; docs/results/photos.md).
+    #[serde(default = "yes")]
+    pub photo_light: bool,
 }
 
 fn photo_mask_default() -> f64 {
@@ -112,6 +120,7 @@ impl Default for LossWeights {
             sym: 0.3,
             alb_through_scene: true,
             photo_mask: photo_mask_default(),
+            photo_light: true,
         }
     }
 }

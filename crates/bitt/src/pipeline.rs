@@ -29,6 +29,10 @@ pub struct TrainingView {
     /// photo's pixel is not trusted ([`TrainingView::trust_photo`]); `None` (every pixel 1,
     /// no multiply in the loss) until then.
     pub weight: Option<Tensor<4>>,
+    /// The view is a photograph whose light has one colour: the forward pass uses
+    /// [`LightParams::one_colour`] (`loss.photo_light`, real photos only). `false`: the
+    /// paper's three light colours.
+    pub one_colour_light: bool,
 }
 
 impl TrainingView {
@@ -108,6 +112,7 @@ impl TrainingView {
             geometry,
             image,
             weight: None,
+            one_colour_light: false,
             mask,
             hand_image,
             plans,
@@ -298,7 +303,12 @@ pub fn forward(
 ) -> Result<Outputs, BittError> {
     let with_consistency = consistency != Consistency::Off;
     let [_, _, h, w] = view.image.dims();
-    let light = point_light(&nets.light.predict(view.image.clone()));
+    let light = nets.light.predict(view.image.clone());
+    let light = point_light(&if view.one_colour_light {
+        light.one_colour()
+    } else {
+        light
+    });
     let coeffs = nets.html.predict(view.hand_image.clone());
     let t = assets.num_texels();
     let coarse_both = pca.textures(Tensor::cat(

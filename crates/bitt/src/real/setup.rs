@@ -139,6 +139,7 @@ pub fn refined_real_trainer(
     };
     let geometry = ViewGeometry::new(&assets, hands, device)?;
     let threshold = config.loss.photo_mask;
+    let one_colour_light = config.loss.photo_light;
     let mut trainer = Trainer::new(config, assets, &pca, geometry, view_image, None, device)?;
     if threshold > 0.0 {
         let keep: Vec<bool> = threshold_mask(view_image, s * s, threshold as f32)
@@ -147,6 +148,7 @@ pub fn refined_real_trainer(
             .collect();
         trainer.view.trust_photo(&keep)?;
     }
+    trainer.view.one_colour_light = one_colour_light;
     Ok((trainer, refinement))
 }
 
