@@ -4,7 +4,8 @@
 # Imports the avatar, counts the armatures and their bones, rotates right_index1 by 45
 # degrees and measures how far the right index finger's and the right thumb's vertices move,
 # then renders the hands with Cycles from the training camera's side. Writes REPORT.json; the
-# checks themselves are made by xtask, which reads it.
+# checks themselves are made by xtask, which reads it. With RENDER.png `-` nothing is
+# rendered (the XR hands, xr/left.glb and xr/right.glb: only their armatures are checked).
 import json
 import math
 import sys
@@ -80,7 +81,7 @@ if right is not None and rig is not None:
 
 # Render: a camera on the training camera's side (the glTF frame's camera looks down -Z,
 # Blender's import turns that into +Y), framing both hands.
-points = [p for o in meshes.values() for p in evaluated_vertices(o)]
+points = [p for o in meshes.values() for p in evaluated_vertices(o)] if png != "-" else []
 if points:
     lo = Vector((min(p.x for p in points), min(p.y for p in points), min(p.z for p in points)))
     hi = Vector((max(p.x for p in points), max(p.y for p in points), max(p.z for p in points)))

@@ -1,5 +1,6 @@
-//! `cargo xtask check-clients [--run DIR] [--iterations N] [--only chromium|blender]
-//! [--screenshot PNG] [--chromium PATH] [--render PNG] [--blender PATH]`:
+//! `cargo xtask check-clients [--run DIR] [--iterations N] [--only chromium|xr|blender]
+//! [--screenshot PNG] [--xr-screenshot PNG] [--chromium PATH] [--bitt PATH] [--render PNG]
+//! [--blender PATH]`:
 //! opens a run's outputs in the programs people view them with, headless, and checks what they
 //! show (not part of CI; see `docs/clients.md`).
 //!
@@ -12,10 +13,16 @@
 //!   Chromium): the viewer draws both hands, and a screenshot of its `#viewer-only` mode
 //!   shows them lit, textured and centred on the canvas (saved to
 //!   `docs/images/report_viewer.png`).
+//! - [`xr`]: `xr/xr.html`, the per-hand XR avatars driven by three.js's own
+//!   `XRHandMeshModel` from stub WebXR joint poses (headless Chromium again): in its test mode,
+//!   a novel pose's hands in pure colours from the scene's camera, compared pixel by pixel with
+//!   `bitt render-avatar --masks` of the same pose (IoU per hand at least 0.95); and a
+//!   screenshot of the page as it opens (saved to `docs/images/xr_hands.png`).
 //! - [`blender`]: `avatar.glb` in Blender (Debian's `blender`, headless, `check_blender.py`):
 //!   two armatures of at least 21 bones; rotating `right_index1` by 45 degrees moves the right
 //!   index finger's vertices and not the thumb's; a Cycles render (saved to
-//!   `docs/images/avatar_blender.png`).
+//!   `docs/images/avatar_blender.png`); and `xr/left.glb`, `xr/right.glb`: one armature each,
+//!   its bones named exactly as the convention's joints (25 WebXR, 26 OpenXR).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -28,11 +35,16 @@ struct Options {
     run: Option<PathBuf>,
     iterations: usize,
     screenshot: PathBuf,
+    xr_screenshot: PathBuf,
     chromium: Option<PathBuf>,
+    bitt: Option<PathBuf>,
     render: PathBuf,
     blender: Option<PathBuf>,
     only: Option<String>,
 }
+
+/// The clients `--only` takes.
+const CLIENTS: [&str; 3] = ["chromium", "xr", "blender"];
 
 impl Options {
     fn parse(args: &[String]) -> Result<Self> {
@@ -40,7 +52,9 @@ impl Options {
             run: None,
             iterations: 300,
             screenshot: crate::root().join("docs/images/report_viewer.png"),
+            xr_screenshot: crate::root().join("docs/images/xr_hands.png"),
             chromium: std::env::var_os("BITT_CHROMIUM").map(PathBuf::from),
+            bitt: None,
             render: crate::root().join("docs/images/avatar_blender.png"),
             blender: std::env::var_os("BITT_BLENDER").map(PathBuf::from),
             only: None,
@@ -52,20 +66,23 @@ impl Options {
                 "--run" => o.run = Some(PathBuf::from(value()?)),
                 "--iterations" => o.iterations = value()?.parse().context("--iterations")?,
                 "--screenshot" => o.screenshot = PathBuf::from(value()?),
+                "--xr-screenshot" => o.xr_screenshot = PathBuf::from(value()?),
                 "--chromium" => o.chromium = Some(PathBuf::from(value()?)),
+                "--bitt" => o.bitt = Some(PathBuf::from(value()?)),
                 "--render" => o.render = PathBuf::from(value()?),
                 "--blender" => o.blender = Some(PathBuf::from(value()?)),
                 "--only" => {
                     let v = value()?.clone();
-                    if !["chromium", "blender"].contains(&v.as_str()) {
-                        bail!("--only takes chromium or blender, not `{v}`");
+                    if !CLIENTS.contains(&v.as_str()) {
+                        bail!("--only takes {}, not `{v}`", CLIENTS.join(", "));
                     }
                     o.only = Some(v);
                 }
                 other => bail!(
                     "unknown option `{other}`; usage: cargo xtask check-clients [--run DIR] \
-                     [--iterations N] [--only chromium|blender] [--screenshot PNG] \
-                     [--chromium PATH] [--render PNG] [--blender PATH]"
+                     [--iterations N] [--only chromium|xr|blender] [--screenshot PNG] \
+                     [--xr-screenshot PNG] [--chromium PATH] [--bitt PATH] [--render PNG] \
+                     [--blender PATH]"
                 ),
             }
         }
@@ -80,6 +97,13 @@ pub fn check_clients(args: &[String]) -> Result<()> {
     let wants = |client: &str| o.only.as_deref().is_none_or(|only| only == client);
     if wants("chromium") {
         chromium(&run, &o.screenshot, o.chromium.as_deref())?;
+    }
+    if wants("xr") {
+        let bitt = match &o.bitt {
+            Some(p) => p.clone(),
+            None => crate::build_bitt()?,
+        };
+        xr(&run, &o.xr_screenshot, o.chromium.as_deref(), &bitt)?;
     }
     if wants("blender") {
         blender(&run, &o.render, o.blender.as_deref())?;
@@ -128,13 +152,15 @@ fn prepare_run(run: Option<&Path>, iterations: usize) -> Result<PathBuf> {
     Ok(std::fs::canonicalize(&dir)?)
 }
 
-/// The browser's window in CSS pixels (device scale factor 1: one pixel each).
+/// The browser's window in CSS pixels (device scale factor 1: one pixel each), unless a check
+/// needs another size.
 const WINDOW: (u32, u32) = (960, 640);
 
 /// Flags for every headless Chromium run here: no GPU, WebGL through SwiftShader (ANGLE),
-/// a throw-away profile, and virtual time so the page's scripts (module parsing, the GLB's
-/// decoding, the first frames) finish before the DOM or the screenshot is taken.
-fn chromium_flags(profile: &Path) -> Vec<String> {
+/// a throw-away profile, a `window` of that many CSS pixels (a screenshot has exactly that
+/// size), and virtual time so the page's scripts (module parsing, the GLB's decoding, the
+/// first frames) finish before the DOM or the screenshot is taken.
+fn chromium_flags(profile: &Path, window: (u32, u32)) -> Vec<String> {
     let mut flags = vec![
         "--headless".to_string(),
         "--disable-gpu".into(),
@@ -147,7 +173,7 @@ fn chromium_flags(profile: &Path) -> Vec<String> {
         "--mute-audio".into(),
         "--enable-logging=stderr".into(),
         "--v=0".into(),
-        format!("--window-size={},{}", WINDOW.0, WINDOW.1),
+        format!("--window-size={},{}", window.0, window.1),
         "--virtual-time-budget=20000".into(),
         format!("--user-data-dir={}", profile.display()),
     ];
@@ -196,24 +222,62 @@ fn find_chromium(program: Option<&Path>) -> Result<PathBuf> {
     )
 }
 
-/// Runs Chromium on `url` with `extra` flags; returns stdout. Fails with the page's console
-/// messages when Chromium fails.
-fn run_chromium(program: &Path, profile: &Path, extra: &[String], url: &str) -> Result<String> {
-    let out = Command::new(program)
-        .args(chromium_flags(profile))
-        .args(extra)
-        .arg(url)
-        .output()
-        .with_context(|| format!("running {}", program.display()))?;
-    if !out.status.success() {
-        bail!(
-            "{} failed ({}) on {url}:\n{}",
-            program.display(),
-            out.status,
-            console(&out.stderr)
-        );
+/// A headless Chromium and its throw-away profile.
+struct Chromium {
+    program: PathBuf,
+    profile: PathBuf,
+}
+
+impl Chromium {
+    /// Runs Chromium on `url` in a `window` with `extra` flags; returns stdout. Fails with
+    /// the page's console messages when Chromium fails.
+    fn run(&self, window: (u32, u32), extra: &[String], url: &str) -> Result<String> {
+        let program = &self.program;
+        let out = Command::new(program)
+            .args(chromium_flags(&self.profile, window))
+            .args(extra)
+            .arg(url)
+            .output()
+            .with_context(|| format!("running {}", program.display()))?;
+        if !out.status.success() {
+            bail!(
+                "{} failed ({}) on {url}:\n{}",
+                program.display(),
+                out.status,
+                console(&out.stderr)
+            );
+        }
+        Ok(String::from_utf8_lossy(&out.stdout).into_owned())
     }
-    Ok(String::from_utf8_lossy(&out.stdout).into_owned())
+
+    /// The page at `url` after its scripts ran (`--dump-dom`).
+    fn dom(&self, window: (u32, u32), url: &str) -> Result<String> {
+        self.run(window, &["--dump-dom".to_string()], url)
+    }
+
+    /// A screenshot of the page at `url`, `window` pixels, written to `png` and returned.
+    fn screenshot(&self, window: (u32, u32), url: &str, png: &Path) -> Result<Vec<u8>> {
+        self.run(window, &[format!("--screenshot={}", png.display())], url)?;
+        std::fs::read(png).context("Chromium wrote no screenshot")
+    }
+
+    /// Runs the measuring `page` (written to `path`) and returns the JSON it writes into
+    /// `<pre id="stats">`; fails when it reports an `error`.
+    fn measure(&self, path: &Path, page: &str) -> Result<Value> {
+        std::fs::write(path, page)?;
+        let dom = self.dom(WINDOW, &file_url(path))?;
+        let stats = dom
+            .split("<pre id=\"stats\">")
+            .nth(1)
+            .and_then(|s| s.split("</pre>").next())
+            .context("the measuring page wrote nothing")?;
+        let stats: Value =
+            serde_json::from_str(stats).with_context(|| format!("measurements `{stats}`"))?;
+        if let Some(e) = stats["error"].as_str() {
+            bail!("measuring the screenshot failed: {e}");
+        }
+        Ok(stats)
+    }
 }
 
 /// The page's console messages in Chromium's log (`--enable-logging=stderr`).
@@ -241,30 +305,50 @@ fn file_url(path: &Path) -> String {
 /// The viewer's status (`<output id="bitt-viewer-status" data-state=...>JSON</output>`) in
 /// a DOM dump.
 fn viewer_status(dom: &str) -> Result<Value> {
+    page_status(dom, "bitt-viewer-status", "3D viewer")
+}
+
+/// A page's status element (`<output id="ID" data-state=... [data-warnings=JSON]>JSON
+/// </output>`) in a DOM dump: its JSON text with `state` and, where the element has them,
+/// `warnings` added. `what` names the page in the error when there is none.
+fn page_status(dom: &str, id: &str, what: &str) -> Result<Value> {
     let start = dom
-        .find("id=\"bitt-viewer-status\"")
-        .context("the page has no 3D viewer (no #bitt-viewer-status)")?;
+        .find(&format!("id=\"{id}\""))
+        .with_context(|| format!("the page has no {what} (no #{id})"))?;
     let element = &dom[start..];
     let open_end = element.find('>').context("unterminated status element")?;
     let close = element
         .find("</output>")
         .context("unterminated status element")?;
-    let state = element[..open_end]
-        .split("data-state=\"")
-        .nth(1)
-        .and_then(|s| s.split('"').next())
-        .unwrap_or("");
-    let text = element[open_end + 1..close]
-        .replace("&lt;", "<")
-        .replace("&gt;", ">")
-        .replace("&amp;", "&");
+    let attribute = |name: &str| {
+        element[..open_end]
+            .split(&format!("{name}=\""))
+            .nth(1)
+            .and_then(|s| s.split('"').next())
+            .map(unescape_html)
+    };
+    let text = unescape_html(&element[open_end + 1..close]);
     let mut v: Value = if text.trim().is_empty() {
         serde_json::json!({})
     } else {
-        serde_json::from_str(&text).with_context(|| format!("viewer status `{text}`"))?
+        serde_json::from_str(&text).with_context(|| format!("{what} status `{text}`"))?
     };
-    v["state"] = state.into();
+    v["state"] = attribute("data-state").unwrap_or_default().into();
+    if let Some(w) = attribute("data-warnings") {
+        v["warnings"] =
+            serde_json::from_str(&w).with_context(|| format!("{what} warnings `{w}`"))?;
+    }
     Ok(v)
+}
+
+/// Text or an attribute value of a DOM dump with the entities Chromium writes decoded.
+fn unescape_html(s: &str) -> String {
+    s.replace("&quot;", "\"")
+        .replace("&#39;", "'")
+        .replace("&nbsp;", "\u{a0}")
+        .replace("&lt;", "<")
+        .replace("&gt;", ">")
+        .replace("&amp;", "&")
 }
 
 /// Checks `report.html` of `run` in headless Chromium: the 3D view loads and draws both hands
@@ -273,19 +357,20 @@ fn viewer_status(dom: &str) -> Result<Value> {
 /// pixels off the background, centred, lit and textured (statistics computed by Chromium on
 /// the PNG itself, embedded as a data URL in a scratch page).
 pub fn chromium(run: &Path, screenshot: &Path, program: Option<&Path>) -> Result<()> {
-    let program = find_chromium(program)?;
     let scratch = std::env::temp_dir().join(format!("bitt-check-chromium-{}", std::process::id()));
     std::fs::create_dir_all(&scratch)?;
-    let profile = scratch.join("profile");
+    let browser = Chromium {
+        program: find_chromium(program)?,
+        profile: scratch.join("profile"),
+    };
     let report = std::fs::canonicalize(run.join("report.html"))
         .with_context(|| format!("{}/report.html", run.display()))?;
     let report_url = file_url(&report);
-    let dump = ["--dump-dom".to_string()];
 
     // 1. The report as it opens, and the viewer alone: the viewer's own status.
     let mut canvas = None;
     for url in [report_url.clone(), format!("{report_url}#viewer-only")] {
-        let dom = run_chromium(&program, &profile, &dump, &url)?;
+        let dom = browser.dom(WINDOW, &url)?;
         let status = viewer_status(&dom)?;
         if status["state"] != "ready" {
             bail!("{url}: the 3D view did not draw: {status}");
@@ -297,16 +382,7 @@ pub fn chromium(run: &Path, screenshot: &Path, program: Option<&Path>) -> Result
         println!("check-clients chromium: {url}: viewer ready: {status}");
         canvas = Some(status["canvas"].clone());
     }
-    let rect: Vec<u32> = canvas
-        .as_ref()
-        .and_then(Value::as_array)
-        .map(|a| {
-            a.iter()
-                .filter_map(|x| x.as_u64())
-                .map(|x| x as u32)
-                .collect()
-        })
-        .unwrap_or_default();
+    let rect = u32s(canvas.as_ref());
     let [x, y, w, h] = rect[..] else {
         bail!("the viewer did not report its canvas: {canvas:?}");
     };
@@ -319,28 +395,13 @@ pub fn chromium(run: &Path, screenshot: &Path, program: Option<&Path>) -> Result
         std::fs::create_dir_all(parent)?;
     }
     let shot = scratch.join("report_viewer.png");
-    run_chromium(
-        &program,
-        &profile,
-        &[format!("--screenshot={}", shot.display())],
-        &format!("{report_url}#viewer-only"),
-    )?;
-    let png = std::fs::read(&shot).context("Chromium wrote no screenshot")?;
+    let png = browser.screenshot(WINDOW, &format!("{report_url}#viewer-only"), &shot)?;
 
     // 3. Its canvas region, measured by Chromium on the PNG.
-    let page = scratch.join("measure.html");
-    std::fs::write(&page, measure_page(&png, [x, y, w]))?;
-    let dom = run_chromium(&program, &profile, &dump, &file_url(&page))?;
-    let stats = dom
-        .split("<pre id=\"stats\">")
-        .nth(1)
-        .and_then(|s| s.split("</pre>").next())
-        .context("the measuring page wrote nothing")?;
-    let stats: Value =
-        serde_json::from_str(stats).with_context(|| format!("measurements `{stats}`"))?;
-    if let Some(e) = stats["error"].as_str() {
-        bail!("measuring the screenshot failed: {e}");
-    }
+    let stats = browser.measure(
+        &scratch.join("measure.html"),
+        &measure_page(&png, [x, y, w]),
+    )?;
     let num = |k: &str| stats[k].as_f64().unwrap_or(f64::NAN);
     let (covered, cx, cy) = (num("covered"), num("cx"), num("cy"));
     let (mean, spread, colours) = (num("mean"), num("std"), num("colours"));
@@ -382,6 +443,18 @@ pub fn chromium(run: &Path, screenshot: &Path, program: Option<&Path>) -> Result
     }
     println!("check-clients chromium: passed");
     Ok(())
+}
+
+/// The non-negative integers of a JSON array (a status's rectangle or size).
+fn u32s(v: Option<&Value>) -> Vec<u32> {
+    v.and_then(Value::as_array)
+        .map(|a| {
+            a.iter()
+                .filter_map(Value::as_u64)
+                .map(|x| x as u32)
+                .collect()
+        })
+        .unwrap_or_default()
 }
 
 /// A page that measures the region of `png` from `x, y`, `w` wide, down to its bottom (the
@@ -434,6 +507,335 @@ if (img.complete) measure(); else img.addEventListener('load', measure);
     )
 }
 
+/// The files of a run's `xr/` folder the XR check reads (`bitt train-scene` and `bitt export
+/// --xr webxr` write them).
+const XR_FILES: [&str; 5] = [
+    "left.glb",
+    "right.glb",
+    "joints.json",
+    "playback.json",
+    "xr.html",
+];
+
+/// The smallest IoU per hand between the XR page's test screenshot and the project's masks.
+const MIN_XR_IOU: f64 = 0.95;
+
+/// The side at which a small square frame is compared once more (the tiny preset's images
+/// are 32 pixels: a hand is a hundred pixels there, so its outline is compared here too).
+const XR_COMPARE_SIZE: u32 = 256;
+
+/// What the XR check compares: frame `frame` of `playback.json` (novel pose `novel_pose` of
+/// the run, or the training pose), whose camera is `size` pixels.
+struct XrFrame {
+    page: PathBuf,
+    frame: usize,
+    novel_pose: Option<u64>,
+    name: String,
+    size: (u32, u32),
+}
+
+/// The run's XR page and the frame to compare: the first novel pose (frames say which novel
+/// pose they are, `novel_pose`; `null` for the training pose), else the first frame.
+fn xr_frame(run: &Path) -> Result<XrFrame> {
+    let dir = run.join("xr");
+    let missing: Vec<&str> = XR_FILES
+        .into_iter()
+        .filter(|f| !dir.join(f).is_file())
+        .collect();
+    if !missing.is_empty() {
+        bail!(
+            "{}: no {} (bitt train-scene and bitt export --xr webxr write them)",
+            dir.display(),
+            missing.join(", ")
+        );
+    }
+    let playback: Value = serde_json::from_slice(&std::fs::read(dir.join("playback.json"))?)
+        .context("xr/playback.json is not JSON")?;
+    let frames = playback["frames"].as_array().map_or(&[][..], Vec::as_slice);
+    let frame = frames
+        .iter()
+        .position(|f| f["novel_pose"].is_u64())
+        .unwrap_or(0);
+    let f = frames
+        .get(frame)
+        .context("xr/playback.json has no frames")?;
+    let side = |k: &str| {
+        f["camera"][k]
+            .as_u64()
+            .filter(|&v| (1..=8192).contains(&v))
+            .map(|v| v as u32)
+            .with_context(|| format!("xr/playback.json: frame {frame}'s camera has no {k}"))
+    };
+    Ok(XrFrame {
+        page: std::fs::canonicalize(dir.join("xr.html"))?,
+        frame,
+        novel_pose: f["novel_pose"].as_u64(),
+        name: f["name"].as_str().unwrap_or("").to_string(),
+        size: (side("width")?, side("height")?),
+    })
+}
+
+/// Checks `xr/xr.html` of `run` in headless Chromium (see the module docs): the test mode of
+/// a novel pose against `bitt render-avatar --masks` of that pose (the release `bitt` at
+/// `bitt`), then the page as it opens, whose screenshot is saved to `screenshot`.
+pub fn xr(run: &Path, screenshot: &Path, program: Option<&Path>, bitt: &Path) -> Result<()> {
+    let xr = xr_frame(run)?;
+    let scratch = std::env::temp_dir().join(format!("bitt-check-xr-{}", std::process::id()));
+    std::fs::create_dir_all(&scratch)?;
+    let browser = Chromium {
+        program: find_chromium(program)?,
+        profile: scratch.join("profile"),
+    };
+    let url = file_url(&xr.page);
+    let (w, h) = xr.size;
+    println!(
+        "check-clients xr: playback frame {} `{}` ({}), {w}x{h}",
+        xr.frame,
+        xr.name,
+        xr.novel_pose
+            .map_or("the training pose".to_string(), |k| format!(
+                "novel pose {k}"
+            ))
+    );
+
+    // 1-3. At the frame's own size, and a small square frame at XR_COMPARE_SIZE too.
+    compare_xr(&browser, &xr, &scratch, bitt, run, None)?;
+    if w == h && w < XR_COMPARE_SIZE {
+        compare_xr(&browser, &xr, &scratch, bitt, run, Some(XR_COMPARE_SIZE))?;
+    }
+
+    // 4. The page as it opens, and its screenshot.
+    let status = xr_status(&browser, WINDOW, &url)?;
+    let rect = u32s(Some(&status["rect"]));
+    let [x, y, cw, _] = rect[..] else {
+        bail!("{url}: the page did not report its canvas: {status}");
+    };
+    let png = browser.screenshot(WINDOW, &url, &scratch.join("xr_hands.png"))?;
+    let stats = browser.measure(
+        &scratch.join("measure.html"),
+        &measure_page(&png, [x, y, cw]),
+    )?;
+    let num = |k: &str| stats[k].as_f64().unwrap_or(f64::NAN);
+    let (covered, spread, colours) = (num("covered"), num("std"), num("colours"));
+    if let Some(parent) = screenshot.parent() {
+        std::fs::create_dir_all(parent)?;
+    }
+    std::fs::write(screenshot, &png)
+        .with_context(|| format!("saving the screenshot to {}", screenshot.display()))?;
+    println!(
+        "check-clients xr: screenshot {}: hands cover {:.1}% of the canvas, brightness spread \
+         {spread:.1}, {colours} colours",
+        screenshot.display(),
+        100.0 * covered
+    );
+    if !(0.01..=0.9).contains(&covered) || !(spread >= 3.0 && colours >= 50.0) {
+        bail!(
+            "xr.html as it opens: the hands cover {:.1}% of the canvas (want 1-90%), \
+             brightness spread {spread:.1} (want at least 3), {colours} colours (want at least \
+             50: textured)",
+            100.0 * covered
+        );
+    }
+    let _ = std::fs::remove_dir_all(&scratch);
+    println!("check-clients xr: passed");
+    Ok(())
+}
+
+/// Compares the XR page's test mode with the project's masks of the same frame, at the
+/// frame's size or `size` pixels square (the intrinsics scaled, `render-avatar --size`):
+/// 1. the test page draws the frame at that size, every bone bound;
+/// 2. its screenshot and `bitt render-avatar --masks` of the same pose and camera;
+/// 3. each hand's IoU ([`check_ious`]).
+fn compare_xr(
+    browser: &Chromium,
+    xr: &XrFrame,
+    scratch: &Path,
+    bitt: &Path,
+    run: &Path,
+    size: Option<u32>,
+) -> Result<()> {
+    let (w, h) = size.map_or(xr.size, |s| (s, s));
+    let test_url = match size {
+        None => format!("{}#test={}", file_url(&xr.page), xr.frame),
+        Some(s) => format!("{}#test={}&size={s}", file_url(&xr.page), xr.frame),
+    };
+    // The canvas is w x h at the top left; the window no smaller than the usual one (in a
+    // tiny window headless Chromium may never finish a screenshot).
+    let window = (w.max(WINDOW.0), h.max(WINDOW.1));
+    let status = xr_status(browser, window, &test_url)?;
+    if u32s(Some(&status["canvas"])) != [w, h] || !u32s(Some(&status["rect"])).starts_with(&[0, 0])
+    {
+        bail!("{test_url}: the canvas is not {w}x{h} at the top left: {status}");
+    }
+    let shot = browser.screenshot(window, &test_url, &scratch.join(format!("xr_{w}.png")))?;
+    let masks = render_masks(
+        bitt,
+        run,
+        xr.novel_pose,
+        size,
+        &scratch.join(format!("masks_{w}.png")),
+    )?;
+    let stats = browser.measure(&scratch.join("iou.html"), &iou_page(&shot, &masks, (w, h)))?;
+    println!("check-clients xr: at {w}x{h}:");
+    check_ious(&stats)
+}
+
+/// The XR page's status at `url` in a `window`: it must be ready and its hand models must
+/// have found every bone (`XRHandMeshModel` warns "Couldn't find <joint> in <hand> hand
+/// mesh" otherwise); other warnings are printed.
+fn xr_status(browser: &Chromium, window: (u32, u32), url: &str) -> Result<Value> {
+    let dom = browser.dom(window, url)?;
+    let status = page_status(&dom, "bitt-xr-status", "XR page")?;
+    if status["state"] != "ready" {
+        bail!("{url}: the XR page did not draw: {status}");
+    }
+    let warnings: Vec<&str> = status["warnings"]
+        .as_array()
+        .map(|w| w.iter().filter_map(Value::as_str).collect())
+        .unwrap_or_default();
+    let unbound: Vec<&str> = warnings
+        .iter()
+        .copied()
+        .filter(|w| w.contains("Couldn't find"))
+        .collect();
+    if !unbound.is_empty() {
+        bail!(
+            "{url}: XRHandMeshModel could not bind bones:\n{}",
+            unbound.join("\n")
+        );
+    }
+    for w in &warnings {
+        println!("check-clients xr: warning on {url}: {w}");
+    }
+    println!("check-clients xr: {url}: ready: {status}");
+    Ok(status)
+}
+
+/// `bitt render-avatar --run RUN [--novel-pose K] [--size S] --masks --out OUT`: the
+/// project's own render of the pose as per-hand masks (left red, right green, black
+/// elsewhere); returns the PNG.
+fn render_masks(
+    bitt: &Path,
+    run: &Path,
+    novel_pose: Option<u64>,
+    size: Option<u32>,
+    out: &Path,
+) -> Result<Vec<u8>> {
+    let mut command = Command::new(bitt);
+    command.args(["render-avatar", "--masks", "--run"]).arg(run);
+    if let Some(k) = novel_pose {
+        command.args(["--novel-pose", &k.to_string()]);
+    }
+    if let Some(s) = size {
+        command.args(["--size", &s.to_string()]);
+    }
+    let result = command
+        .arg("--out")
+        .arg(out)
+        .output()
+        .with_context(|| format!("running {}", bitt.display()))?;
+    if !result.status.success() {
+        bail!(
+            "bitt render-avatar --masks failed ({}):\n{}",
+            result.status,
+            String::from_utf8_lossy(&result.stderr)
+        );
+    }
+    std::fs::read(out).context("bitt render-avatar --masks wrote no PNG")
+}
+
+/// Checks the IoU of each hand (the measurements of [`iou_page`]): at least [`MIN_XR_IOU`]
+/// where either image shows the hand; a hand neither shows (a frame without it) is skipped,
+/// but at least one hand must be compared.
+fn check_ious(stats: &Value) -> Result<()> {
+    let mut compared = 0;
+    let mut low = Vec::new();
+    for hand in ["left", "right"] {
+        let s = &stats[hand];
+        let count = |k: &str| s[k].as_u64().unwrap_or(0);
+        let (shot, render) = (count("shot"), count("render"));
+        let Some(iou) = s["iou"].as_f64() else {
+            println!("  {hand} hand: in neither image");
+            continue;
+        };
+        compared += 1;
+        println!(
+            "  {hand} hand: IoU {iou:.4} (XRHandMeshModel {shot} px, bitt render-avatar \
+             {render} px, both {} px)",
+            count("both")
+        );
+        if iou < MIN_XR_IOU {
+            low.push(format!("{hand} {iou:.4}"));
+        }
+    }
+    if compared == 0 {
+        bail!("neither image shows a hand: {stats}");
+    }
+    if !low.is_empty() {
+        bail!(
+            "the XR page's hands do not overlap the project's render (IoU {} < {MIN_XR_IOU})",
+            low.join(", ")
+        );
+    }
+    Ok(())
+}
+
+/// A page that compares the XR page's test screenshot `shot` with the masks `masks` (both
+/// `w x h`, the screenshot at least): per hand, the pixels each shows (left: red, r > 128,
+/// g < 100, b < 100; right: green, the same with r and g swapped), those both show, and their
+/// IoU (null where neither shows the hand); written as JSON into `<pre id="stats">`.
+fn iou_page(shot: &[u8], masks: &[u8], (w, h): (u32, u32)) -> String {
+    format!(
+        r#"<!doctype html><meta charset="utf-8">
+<img id="shot" src="data:image/png;base64,{shot}"><img id="masks" src="data:image/png;base64,{masks}">
+<pre id="stats"></pre>
+<script>
+const out = document.getElementById('stats');
+const images = [document.getElementById('shot'), document.getElementById('masks')];
+const [w, h] = [{w}, {h}];
+const hand = (d, k) =>
+  d[k] > 128 && d[k + 1] < 100 && d[k + 2] < 100 ? 'left'
+  : d[k + 1] > 128 && d[k] < 100 && d[k + 2] < 100 ? 'right' : null;
+const measure = () => {{ try {{
+  const [shot, masks] = images;
+  if (shot.naturalWidth < w || shot.naturalHeight < h)
+    throw new Error(`the screenshot is ${{shot.naturalWidth}}x${{shot.naturalHeight}}, not ${{w}}x${{h}}`);
+  if (masks.naturalWidth !== w || masks.naturalHeight !== h)
+    throw new Error(`the masks are ${{masks.naturalWidth}}x${{masks.naturalHeight}}, not ${{w}}x${{h}}`);
+  const [a, b] = images.map((img) => {{
+    const c = document.createElement('canvas');
+    c.width = w;
+    c.height = h;
+    const g = c.getContext('2d');
+    g.drawImage(img, 0, 0);
+    return g.getImageData(0, 0, w, h).data;
+  }});
+  const stats = {{ width: w, height: h }};
+  for (const name of ['left', 'right']) {{
+    let shot = 0, render = 0, both = 0;
+    for (let k = 0; k < 4 * w * h; k += 4) {{
+      const x = hand(a, k) === name, y = hand(b, k) === name;
+      shot += x; render += y; both += x && y;
+    }}
+    const union = shot + render - both;
+    stats[name] = {{ shot, render, both, iou: union ? both / union : null }};
+  }}
+  out.textContent = JSON.stringify(stats);
+}} catch (e) {{ out.textContent = JSON.stringify({{ error: String(e) }}); }} }};
+// The load events, not decode(): headless Chromium's virtual time waits for the former.
+let pending = images.length;
+const loaded = () => {{ if (--pending === 0) measure(); }};
+for (const img of images) {{
+  if (img.complete) loaded();
+  else {{ img.addEventListener('load', loaded); img.addEventListener('error', loaded); }}
+}}
+</script>
+"#,
+        shot = base64(shot),
+        masks = base64(masks)
+    )
+}
+
 fn base64(bytes: &[u8]) -> String {
     const T: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
@@ -474,44 +876,19 @@ pub fn blender(run: &Path, render: &Path, program: Option<&Path>) -> Result<()> 
     std::fs::create_dir_all(&scratch)?;
     let script = scratch.join("check_blender.py");
     std::fs::write(&script, BLENDER_SCRIPT)?;
-    let report_path = scratch.join("report.json");
     let png = scratch.join("render.png");
     println!(
         "check-clients: Blender ({}) on {}",
         program.display(),
         glb.display()
     );
-    let out = Command::new(&program)
-        .args([
-            "-b",
-            "--factory-startup",
-            "--python-exit-code",
-            "3",
-            "--python",
-        ])
-        .arg(&script)
-        .arg("--")
-        .args([&glb, &png, &report_path])
-        .output()
-        .with_context(|| format!("running {}", program.display()))?;
-    let log =
-        String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr);
-    if !out.status.success() || !report_path.is_file() {
-        let hint = if log.contains("No module named 'numpy'") {
-            "\n(Blender's Python has no numpy: apt-get install python3-numpy)"
-        } else {
-            ""
-        };
-        let tail: Vec<&str> = log.lines().rev().take(25).collect();
-        bail!(
-            "Blender failed ({}) on {}:\n{}{hint}",
-            out.status,
-            glb.display(),
-            tail.into_iter().rev().collect::<Vec<_>>().join("\n")
-        );
-    }
-    let report: Value =
-        serde_json::from_slice(&std::fs::read(&report_path)?).context("Blender's report")?;
+    let report = run_blender(
+        &program,
+        &script,
+        &glb,
+        Some(&png),
+        &scratch.join("report.json"),
+    )?;
     let armatures = report["armatures"].as_array().cloned().unwrap_or_default();
     let bones = |a: &Value| a["bones"].as_array().map_or(0, Vec::len);
     println!(
@@ -550,6 +927,132 @@ pub fn blender(run: &Path, render: &Path, program: Option<&Path>) -> Result<()> 
     }
     std::fs::write(render, &bytes)?;
     println!("  Cycles render: {}", render.display());
+    if run.join("xr").is_dir() {
+        blender_xr(&program, &script, run, &scratch)?;
+    } else {
+        println!("  no xr/ folder in the run: the XR hands' armatures are not checked");
+    }
     let _ = std::fs::remove_dir_all(&scratch);
+    Ok(())
+}
+
+/// Runs `script` (`check_blender.py`) in Blender on `glb`, rendering to `png` (none: no
+/// render), and returns the report it writes to `report`.
+fn run_blender(
+    program: &Path,
+    script: &Path,
+    glb: &Path,
+    png: Option<&Path>,
+    report: &Path,
+) -> Result<Value> {
+    let out = Command::new(program)
+        .args([
+            "-b",
+            "--factory-startup",
+            "--python-exit-code",
+            "3",
+            "--python",
+        ])
+        .arg(script)
+        .arg("--")
+        .arg(glb)
+        .arg(png.map_or(Path::new("-"), |p| p))
+        .arg(report)
+        .output()
+        .with_context(|| format!("running {}", program.display()))?;
+    let log =
+        String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr);
+    if !out.status.success() || !report.is_file() {
+        let hint = if log.contains("No module named 'numpy'") {
+            "\n(Blender's Python has no numpy: apt-get install python3-numpy)"
+        } else {
+            ""
+        };
+        let tail: Vec<&str> = log.lines().rev().take(25).collect();
+        bail!(
+            "Blender failed ({}) on {}:\n{}{hint}",
+            out.status,
+            glb.display(),
+            tail.into_iter().rev().collect::<Vec<_>>().join("\n")
+        );
+    }
+    serde_json::from_slice(&std::fs::read(report)?).context("Blender's report")
+}
+
+/// The run's per-hand XR avatars (`xr/left.glb`, `xr/right.glb`) in Blender: each imports as
+/// one armature whose bones are exactly the bones `joints.json` lists for that hand, as many
+/// as the convention has joints (WebXR 25, OpenXR 26). (That the names are WebXR's own is
+/// checked by the `xr` client: `XRHandMeshModel` binds its bones by them.)
+fn blender_xr(program: &Path, script: &Path, run: &Path, scratch: &Path) -> Result<()> {
+    let dir = run.join("xr");
+    let joints: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("joints.json")).context("xr/joints.json")?)
+            .context("xr/joints.json is not JSON")?;
+    let convention = joints["convention"]
+        .as_str()
+        .context("xr/joints.json names no convention")?;
+    for side in ["left", "right"] {
+        let glb = dir.join(format!("{side}.glb"));
+        let report = run_blender(
+            program,
+            script,
+            &glb,
+            None,
+            &scratch.join(format!("xr_{side}.json")),
+        )?;
+        let armatures = report["armatures"].as_array().cloned().unwrap_or_default();
+        let [armature] = &armatures[..] else {
+            bail!(
+                "{}: Blender finds {} armatures, not one",
+                glb.display(),
+                armatures.len()
+            );
+        };
+        let mut bones: Vec<String> = armature["bones"]
+            .as_array()
+            .map(|b| {
+                b.iter()
+                    .filter_map(|n| n.as_str().map(String::from))
+                    .collect()
+            })
+            .unwrap_or_default();
+        let mut expected: Vec<String> = joints[side]
+            .as_array()
+            .map(|j| {
+                j.iter()
+                    .filter_map(|j| j["bone"].as_str().map(String::from))
+                    .collect()
+            })
+            .unwrap_or_default();
+        let count = match convention {
+            "webxr" => 25,
+            "openxr" => 26,
+            other => bail!("xr/joints.json: unknown convention `{other}`"),
+        };
+        if expected.len() != count {
+            bail!(
+                "xr/joints.json lists {} bones for the {side} hand, not {convention}'s {count} joints",
+                expected.len()
+            );
+        }
+        bones.sort();
+        expected.sort();
+        if bones != expected {
+            let missing: Vec<&String> = expected.iter().filter(|n| !bones.contains(n)).collect();
+            let extra: Vec<&String> = bones.iter().filter(|n| !expected.contains(n)).collect();
+            bail!(
+                "{}: the armature's {} bones are not {convention}'s {} joints (missing {missing:?}, \
+                 not joints {extra:?})",
+                glb.display(),
+                bones.len(),
+                expected.len()
+            );
+        }
+        println!(
+            "  xr/{side}.glb: one armature ({}), {} bones, those joints.json lists ({convention})",
+            armature["name"].as_str().unwrap_or("?"),
+            bones.len()
+        );
+    }
     Ok(())
 }

@@ -49,6 +49,11 @@ pub struct RenderAvatarArgs {
     /// Backend.
     #[arg(long, value_enum, default_value = "flex")]
     pub device: DeviceName,
+    /// Write each hand's silhouette instead of the shaded render: the left hand red, the right
+    /// hand green where it is in front, black elsewhere (for compositing and for checking
+    /// other renderers, e.g. `cargo xtask check-clients`' XR check).
+    #[arg(long, conflicts_with = "light")]
+    pub masks: bool,
     /// Output PNG.
     #[arg(long)]
     pub out: PathBuf,
@@ -103,7 +108,11 @@ pub fn run(args: &RenderAvatarArgs) -> Result<()> {
         size: args.size,
         light: user_light,
     };
-    let (image, camera) = saved.render_view(&view, &device)?;
+    let (image, camera) = if args.masks {
+        saved.render_view_masks(&view, &device)?
+    } else {
+        saved.render_view(&view, &device)?
+    };
     let (h, w) = (camera.height as usize, camera.width as usize);
     bitt::outputs::write_png(&args.out, &image, h, w)?;
     println!("wrote {} ({w}x{h})", args.out.display());

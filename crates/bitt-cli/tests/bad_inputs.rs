@@ -412,3 +412,91 @@ fn photos_without_hands_are_refused_naming_the_photo() {
         case.fails(&strs(&args), 1, &[file, problem]);
     }
 }
+
+/// `export --xr` (issue 35): a run without a trained texture, an unknown convention, an
+/// output that is an existing file or a folder of someone else's are refused with nothing
+/// written; a good export writes the five files and replaces only an earlier XR export.
+#[test]
+fn xr_exports_refuse_bad_runs_and_outputs() {
+    let case = Case::new("xr");
+    let run = case.s("run");
+    let args = train(
+        &case,
+        &["--iterations", "5", "--turntable", "0", "--out", &run],
+    );
+    let out = Command::new(env!("CARGO_BIN_EXE_bitt"))
+        .args(strs(&args))
+        .current_dir(&case.dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let xr = case.s("xr");
+    let export = |run: &str, convention: &str, out: &str| -> Vec<String> {
+        ["export", "--run", run, "--xr", convention, "--out", out]
+            .iter()
+            .map(|s| s.to_string())
+            .collect()
+    };
+    // Unknown convention: clap's error, naming the accepted ones.
+    case.fails(&strs(&export(&run, "vr", &xr)), 2, &["webxr", "openxr"]);
+    // An existing file, and a folder that is not an XR export.
+    std::fs::write(case.path("taken.glb"), "mine").unwrap();
+    case.fails(
+        &strs(&export(&run, "webxr", &case.s("taken.glb"))),
+        1,
+        &["taken.glb", "existing file"],
+    );
+    std::fs::create_dir_all(case.path("mine")).unwrap();
+    std::fs::write(case.path("mine/notes.txt"), "my notes").unwrap();
+    case.fails(
+        &strs(&export(&run, "openxr", &case.s("mine"))),
+        1,
+        &["mine", "not an earlier output"],
+    );
+    // A run whose trained texture is gone.
+    let textures = case.path("run/textures/textures.safetensors");
+    let saved = std::fs::read(&textures).unwrap();
+    std::fs::remove_file(&textures).unwrap();
+    case.fails(
+        &strs(&export(&run, "webxr", &xr)),
+        1,
+        &["textures.safetensors"],
+    );
+    std::fs::write(&textures, saved).unwrap();
+    // A good export, then another convention over it.
+    for convention in ["webxr", "openxr"] {
+        let out = Command::new(env!("CARGO_BIN_EXE_bitt"))
+            .args(strs(&export(&run, convention, &xr)))
+            .current_dir(&case.dir)
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(stdout.contains("mean vertex error"), "{stdout}");
+        let mut names: Vec<String> = std::fs::read_dir(&xr)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        let mut want = vec!["joints.json", "left.glb", "playback.json", "right.glb"];
+        if convention == "webxr" {
+            want.push("xr.html");
+        }
+        assert_eq!(names, want, "{convention}");
+    }
+    // Nothing but the export is left beside it (no temporary folders).
+    let stray: Vec<_> = std::fs::read_dir(&case.dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.'))
+        .collect();
+    assert!(stray.is_empty(), "{stray:?}");
+}

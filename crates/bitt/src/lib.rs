@@ -20,6 +20,8 @@
 //! - [`saved`]: a trained run read back from its folder (either kind), for re-rendering and
 //!   re-exporting without the networks.
 //! - [`viewer`]: the report's interactive 3D view of the avatar (three.js, embedded).
+//! - [`xr_page`]: `xr.html`, the per-hand XR avatars driven by three.js's `XRHandMeshModel`
+//!   (the scene's poses as tracked joint poses, or live WebXR hand tracking).
 //! - [`figure`]: `bitt render`'s figures (both hands, each alone, masks, unwrapped images,
 //!   a grid of orthographic views).
 //! - [`figure_inputs`]: what the figures are made of, read and checked (light, UV layouts,
@@ -80,6 +82,7 @@ pub mod texture_model;
 pub mod train_scene;
 pub mod trainer;
 pub mod viewer;
+pub mod xr_page;
 
 pub use config::{LossWeights, OptimConfig, TrainConfig};
 pub use error::BittError;

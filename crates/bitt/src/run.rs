@@ -48,6 +48,8 @@ pub mod files {
     pub const REPORT: &str = "report.html";
     /// The avatar.
     pub const AVATAR: &str = "avatar.glb";
+    /// The per-hand avatars for WebXR hand tracking (`left.glb`, `right.glb`, `xr.html`).
+    pub const XR: &str = "xr";
     /// Loss curves.
     pub const LOSS_PLOT: &str = "loss.png";
     /// The scene a run was trained on (synthetic runs), to resume without the generator.
@@ -458,14 +460,44 @@ pub fn write_run(
     // Rigged (with its clip and a static copy) when the hands' parameters are known; the
     // posed meshes alone for a view made from vertices.
     match &trainer.view.geometry.hands {
-        Some(hands) => AvatarFiles {
-            models: &trainer.assets.models,
-            hands,
-            textures: [&images[0], &images[1]],
-            material: bitt_render::scene::Material::default(),
-            clip: clip.to_vec(),
+        Some(hands) => {
+            AvatarFiles {
+                models: &trainer.assets.models,
+                hands,
+                textures: [&images[0], &images[1]],
+                material: bitt_render::scene::Material::default(),
+                clip: clip.to_vec(),
+            }
+            .write(dir)?;
+            // The hands for WebXR hand tracking (`xr/`), played in the same poses. Synthetic
+            // novel poses are seen from the training camera, real ones from their own (as
+            // `render-avatar --novel-pose` shows them).
+            let mut frames = vec![crate::avatar_export::XrFrame {
+                name: "training pose".into(),
+                novel_pose: None,
+                hands: hands.clone(),
+            }];
+            for (k, pose) in clip.iter().enumerate() {
+                let mut pose = pose.clone();
+                if synthetic.is_some() {
+                    pose.camera = hands.camera;
+                }
+                frames.push(crate::avatar_export::XrFrame {
+                    name: format!("novel pose {k}"),
+                    novel_pose: Some(k),
+                    hands: pose,
+                });
+            }
+            crate::avatar_export::XrAvatar {
+                convention: bitt_mesh::export::XrConvention::WebXr,
+                models: &trainer.assets.models,
+                hands,
+                textures: [&images[0], &images[1]],
+                material: bitt_render::scene::Material::default(),
+                frames,
+            }
+            .write(&dir.join(files::XR))?;
         }
-        .write(dir)?,
         None => {
             let v = &trainer.view.geometry.vertices_host;
             write_avatar_glb(
@@ -694,6 +726,24 @@ fn write_report(
         &dir.join(files::AVATAR),
         &dir.join(files::LIGHT),
     )?);
+    if dir
+        .join(files::XR)
+        .join(crate::avatar_export::xr_files::PAGE)
+        .is_file()
+    {
+        html.push_str(&format!(
+            "<p>For hand tracking: <a href=\"{xr}/{page}\">{xr}/{page}</a> plays the hands \
+             with three.js's <code>XRHandMeshModel</code> and follows live WebXR hands on a \
+             headset; <code>{xr}/{left}</code> and <code>{xr}/{right}</code> are one hand each, \
+             with WebXR's 25 joints as bones (<code>{xr}/{joints}</code> maps them to the \
+             model's joints).</p>",
+            xr = files::XR,
+            page = crate::avatar_export::xr_files::PAGE,
+            left = crate::avatar_export::xr_files::LEFT,
+            right = crate::avatar_export::xr_files::RIGHT,
+            joints = crate::avatar_export::xr_files::JOINTS,
+        ));
+    }
     if let Some(s) = &summary.synthetic {
         html.push_str("<h2>Against ground truth</h2><table><tr><th>evaluation</th><th>method</th><th>L1</th><th>PSNR</th><th>SSIM</th><th>MS-SSIM</th></tr>");
         let mut row = |name: &str, fine: &ImageMetrics, coarse: &ImageMetrics| {

@@ -23,7 +23,7 @@ pub const FIT_RECORD: &str = "fit.json";
 pub const FIT_OVERLAY: &str = "fit_overlay.png";
 
 /// Names a run writes at the top of its folder.
-pub const RUN_NAMES: [&str; 23] = [
+pub const RUN_NAMES: [&str; 25] = [
     files::CONFIG,
     files::CHECKPOINT,
     files::CHECKPOINT_PREVIOUS,
@@ -32,6 +32,8 @@ pub const RUN_NAMES: [&str; 23] = [
     files::LIGHT,
     files::REPORT,
     files::AVATAR,
+    crate::avatar_export::files::STATIC,
+    files::XR,
     files::LOSS_PLOT,
     files::SCENE,
     files::REFINE,

@@ -5,14 +5,14 @@
 
 use std::path::Path;
 
-use bitt_mesh::export::write_atomically;
+use bitt_mesh::export::{XrConvention, write_atomically};
 use bitt_mesh::{HandPair, PinholeCamera, Side, TwoHandScene, procedural_pair};
 use bitt_render::scene::{LightValues, Material};
 use burn::tensor::Device;
 
 use crate::BittError;
 use crate::assets::HandAssets;
-use crate::avatar_export::{AvatarFiles, ExportKind};
+use crate::avatar_export::{AvatarFiles, ExportKind, XrAvatar, XrFrame, XrVertexError};
 use crate::evaluate::move_light;
 use crate::real::{RealAvatar, RealInput, render_textures};
 use crate::run::SavedAvatar;
@@ -240,13 +240,7 @@ impl SavedRun {
         view: &AvatarView,
         device: &Device,
     ) -> Result<(Vec<f32>, PinholeCamera), BittError> {
-        let mut base = view.pose.clone();
-        if let Some(n) = view.size {
-            base.camera = resized(&base.camera, n)?;
-        }
-        let models = self.models();
-        let [yaw, pitch] = view.orbit_deg.map(f64::to_radians);
-        let hands = crate::real::orbit_hands(&base, &models, yaw, pitch)?;
+        let (base, hands) = self.view_hands(view)?;
         let light = match view.light {
             Some(l) => l,
             None if view.same_world => move_light(&self.light(), &self.camera(), &hands.camera),
@@ -255,6 +249,36 @@ impl SavedRun {
             None => move_light(&self.light(), &base.camera, &hands.camera),
         };
         Ok((self.render(&hands, &light, device)?, hands.camera))
+    }
+
+    /// The base pose of `view` (resized) and its hands seen from the orbited camera.
+    fn view_hands(&self, view: &AvatarView) -> Result<(TwoHandScene, TwoHandScene), BittError> {
+        let mut base = view.pose.clone();
+        if let Some(n) = view.size {
+            base.camera = resized(&base.camera, n)?;
+        }
+        let [yaw, pitch] = view.orbit_deg.map(f64::to_radians);
+        let hands = crate::real::orbit_hands(&base, &self.models(), yaw, pitch)?;
+        Ok((base, hands))
+    }
+
+    /// Each hand's silhouette in `view` (`render-avatar --masks`), as an image `[3, H, W]`:
+    /// the left hand red `(1, 0, 0)`, the right hand green `(0, 1, 0)` where it is in front,
+    /// black elsewhere; and the camera.
+    ///
+    /// # Errors
+    /// As [`Self::render_view`].
+    pub fn render_view_masks(
+        &self,
+        view: &AvatarView,
+        device: &Device,
+    ) -> Result<(Vec<f32>, PinholeCamera), BittError> {
+        let (_, hands) = self.view_hands(view)?;
+        let [left, right] = crate::real::silhouettes(&self.assets()?, &hands, device)?;
+        let mut image = vec![0.0f32; 3 * left.len()];
+        image[..left.len()].copy_from_slice(&left);
+        image[left.len()..2 * left.len()].copy_from_slice(&right);
+        Ok((image, hands.camera))
     }
 
     /// Renders the avatar's hands posed as `hands` (its camera included) under `light`;
@@ -287,14 +311,7 @@ impl SavedRun {
         kind: ExportKind,
         out: &Path,
     ) -> Result<(), BittError> {
-        let assets = self.assets()?;
-        let layout = &assets.layouts[0];
-        let s = assets.texture_size;
-        let mut images = Vec::new();
-        for fine in self.fine() {
-            let values = crate::outputs::texture_image(layout, fine)?;
-            images.push(crate::outputs::rgb_image(&values, s, s)?);
-        }
+        let (assets, images) = self.texture_images()?;
         let training = self.training();
         let clip = match hands {
             None => self.novel_poses()?,
@@ -313,5 +330,57 @@ impl SavedRun {
             ExportKind::Obj => files.write_obj(out)?,
         }
         Ok(())
+    }
+
+    /// The run's assets and its fine textures as images (left, right).
+    fn texture_images(&self) -> Result<(HandAssets, Vec<image::RgbImage>), BittError> {
+        let assets = self.assets()?;
+        let layout = &assets.layouts[0];
+        let s = assets.texture_size;
+        let mut images = Vec::new();
+        for fine in self.fine() {
+            let values = crate::outputs::texture_image(layout, fine)?;
+            images.push(crate::outputs::rgb_image(&values, s, s)?);
+        }
+        Ok((assets, images))
+    }
+
+    /// Writes the avatar as two hands for a hand-tracking runtime into the folder `out`
+    /// (`bitt export --xr`; [`XrAvatar`]): played in the training pose and the scene's novel
+    /// poses, each from the camera `render-avatar` shows it from. Returns the vertex error of
+    /// the files driven by tracked joint poses against the forward pass.
+    ///
+    /// # Errors
+    /// A run whose textures do not fit its layout, hands that cannot be posed, `out` a file or
+    /// a folder that is not an earlier XR export (untouched), a write failure (nothing is
+    /// left half-written).
+    pub fn export_xr(
+        &self,
+        convention: XrConvention,
+        out: &Path,
+    ) -> Result<XrVertexError, BittError> {
+        let (assets, images) = self.texture_images()?;
+        let training = self.training();
+        let mut frames = vec![XrFrame {
+            name: "training pose".into(),
+            novel_pose: None,
+            hands: training.clone(),
+        }];
+        for k in 0..self.num_novel_poses() {
+            frames.push(XrFrame {
+                name: format!("novel pose {k}"),
+                novel_pose: Some(k),
+                hands: self.novel_pose(k)?,
+            });
+        }
+        XrAvatar {
+            convention,
+            models: &assets.models,
+            hands: &training,
+            textures: [&images[0], &images[1]],
+            material: Material::default(),
+            frames,
+        }
+        .write(out)
     }
 }

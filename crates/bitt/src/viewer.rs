@@ -69,13 +69,15 @@ pub mod ids {
 
 /// One vendored ES module: its import-map specifier, its source and the rewrites of its
 /// relative imports to bare specifiers.
-struct Module {
-    specifier: &'static str,
-    source: &'static str,
-    rewrites: &'static [(&'static str, &'static str)],
+pub(crate) struct Module {
+    pub(crate) specifier: &'static str,
+    pub(crate) source: &'static str,
+    pub(crate) rewrites: &'static [(&'static str, &'static str)],
 }
 
-const MODULES: [Module; 6] = [
+/// The vendored three.js modules the viewer imports (and the XR page, `xr_page.rs`, with
+/// one more).
+pub(crate) const MODULES: [Module; 6] = [
     Module {
         specifier: "three",
         source: include_str!("../assets/vendor/three/three.module.min.js"),
@@ -117,10 +119,11 @@ const MODULES: [Module; 6] = [
     },
 ];
 
-/// The import map: every vendored module as a base64 `data:` URL.
-fn import_map() -> String {
-    let imports: serde_json::Map<String, serde_json::Value> = MODULES
-        .iter()
+/// The import map of `modules`: each one a base64 `data:` URL, its relative imports
+/// rewritten.
+pub(crate) fn import_map<'a>(modules: impl IntoIterator<Item = &'a Module>) -> String {
+    let imports: serde_json::Map<String, serde_json::Value> = modules
+        .into_iter()
         .map(|m| {
             let source = m
                 .rewrites
@@ -201,7 +204,7 @@ pub fn viewer_html(glb: &[u8], light: &LightValues) -> String {
     html.push_str("<script type=\"application/octet-stream\" id=\"bitt-avatar-glb\">");
     html.push_str(&base64(glb));
     html.push_str("</script>\n<script type=\"importmap\">");
-    html.push_str(&import_map());
+    html.push_str(&import_map(&MODULES));
     html.push_str("</script>\n<script type=\"module\">");
     html.push_str(APP);
     html.push_str("</script></section>\n");
@@ -479,10 +482,11 @@ new GLTFLoader().parse(glb.buffer, '', (gltf) => {
 "##;
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn decode_base64(s: &str) -> Vec<u8> {
+    /// Base64 (RFC 4648, padded) back to bytes; panics on anything else.
+    pub(crate) fn decode_base64(s: &str) -> Vec<u8> {
         let value = |c: u8| match c {
             b'A'..=b'Z' => c - b'A',
             b'a'..=b'z' => c - b'a' + 26,
@@ -505,10 +509,42 @@ mod tests {
     }
 
     /// The text between `start` and the next `end` after it.
-    fn between<'a>(s: &'a str, start: &str, end: &str) -> &'a str {
+    pub(crate) fn between<'a>(s: &'a str, start: &str, end: &str) -> &'a str {
         let i = s.find(start).unwrap_or_else(|| panic!("no {start}")) + start.len();
         let j = s[i..].find(end).unwrap_or_else(|| panic!("no {end}")) + i;
         &s[i..j]
+    }
+
+    /// The import map of a page, checked: every module a data URL, relative imports
+    /// rewritten, and every bare specifier a module imports is in the map. Returns each
+    /// specifier's decoded source.
+    pub(crate) fn checked_import_map(html: &str) -> std::collections::BTreeMap<String, String> {
+        let map: serde_json::Value =
+            serde_json::from_str(between(html, "<script type=\"importmap\">", "</script>"))
+                .unwrap();
+        let imports = map["imports"].as_object().unwrap();
+        let mut sources = std::collections::BTreeMap::new();
+        for (specifier, url) in imports {
+            let url = url.as_str().unwrap();
+            let b64 = url
+                .strip_prefix("data:text/javascript;base64,")
+                .unwrap_or_else(|| panic!("{specifier}: {}", &url[..40.min(url.len())]));
+            let source = String::from_utf8(decode_base64(b64)).unwrap();
+            for quote in ['"', '\''] {
+                for rel in ["./", "../"] {
+                    let pattern = format!("from{quote}{rel}");
+                    assert!(!source.contains(&pattern), "{specifier} imports {pattern}");
+                }
+            }
+            let mut rest = source.as_str();
+            while let Some(i) = rest.find("from\"") {
+                let name = between(&rest[i..], "from\"", "\"");
+                assert!(imports.contains_key(name), "{specifier} imports {name}");
+                rest = &rest[i + 5..];
+            }
+            sources.insert(specifier.clone(), source);
+        }
+        sources
     }
 
     #[test]
@@ -556,12 +592,7 @@ mod tests {
         assert_eq!(l["diffuse"][2], 0.0);
         assert!((l["location"][1].as_f64().unwrap() + 0.2).abs() < 1e-6);
 
-        // The import map: every module a data URL, relative imports rewritten, and every
-        // bare specifier a module imports is in the map.
-        let map: serde_json::Value =
-            serde_json::from_str(between(&html, "<script type=\"importmap\">", "</script>"))
-                .unwrap();
-        let imports = map["imports"].as_object().unwrap();
+        let imports = checked_import_map(&html);
         assert_eq!(imports.len(), MODULES.len());
         for specifier in [
             "three",
@@ -569,25 +600,6 @@ mod tests {
             "three/addons/controls/OrbitControls.js",
         ] {
             assert!(imports.contains_key(specifier), "{specifier}");
-        }
-        for (specifier, url) in imports {
-            let url = url.as_str().unwrap();
-            let b64 = url
-                .strip_prefix("data:text/javascript;base64,")
-                .unwrap_or_else(|| panic!("{specifier}: {}", &url[..40.min(url.len())]));
-            let source = String::from_utf8(decode_base64(b64)).unwrap();
-            for quote in ['"', '\''] {
-                for rel in ["./", "../"] {
-                    let pattern = format!("from{quote}{rel}");
-                    assert!(!source.contains(&pattern), "{specifier} imports {pattern}");
-                }
-            }
-            let mut rest = source.as_str();
-            while let Some(i) = rest.find("from\"") {
-                let name = between(&rest[i..], "from\"", "\"");
-                assert!(imports.contains_key(name), "{specifier} imports {name}");
-                rest = &rest[i + 5..];
-            }
         }
         // The app's own imports are in the map too.
         for name in [

@@ -16,8 +16,14 @@ use crate::MeshError;
 use crate::model::UvLayout;
 
 mod skinned;
+mod xr;
 pub use skinned::{
     RiggedHand, RiggedScene, gltf_vertex_sources, rigged_glb_bytes, skinned_vertices,
+    skinned_vertices_posed,
+};
+pub use xr::{
+    METACARPAL_FRACTIONS, OPENXR_JOINTS, THUMB_TWIST_DEGREES, WEBXR_JOINTS, XrConvention, XrHand,
+    XrJoint, XrSkeleton, xr_glb_bytes,
 };
 
 /// One hand to export.
@@ -57,6 +63,80 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), MeshError> {
     if let Err(e) = result {
         let _ = std::fs::remove_file(&tmp);
         return Err(MeshError::io(path, e));
+    }
+    Ok(())
+}
+
+/// Writes a folder of `files` (name, bytes) as a whole: into a temporary sibling folder,
+/// then renamed to `dir`, so a crash never leaves a folder with some files new and some
+/// missing. An existing `dir` is replaced only when `replaceable` says it is an earlier
+/// output of the same kind (it is moved aside first and removed after); any other existing
+/// path is refused and left untouched.
+///
+/// # Errors
+/// [`MeshError::Invalid`] for an existing `dir` that is a file or not `replaceable`; an
+/// I/O error naming the path.
+pub fn write_folder_atomically(
+    dir: &Path,
+    files: &[(String, Vec<u8>)],
+    replaceable: impl Fn(&Path) -> bool,
+) -> Result<(), MeshError> {
+    if dir.is_file() {
+        return Err(MeshError::Invalid(format!(
+            "{}: is a file; give a folder",
+            dir.display()
+        )));
+    }
+    let exists = dir.is_dir();
+    let empty = exists
+        && std::fs::read_dir(dir)
+            .map_err(|e| MeshError::io(dir, e))?
+            .next()
+            .is_none();
+    if exists && !empty && !replaceable(dir) {
+        return Err(MeshError::Invalid(format!(
+            "{}: a folder that is not an earlier output of this command; give a new or empty \
+             folder (nothing was written)",
+            dir.display()
+        )));
+    }
+    let name = dir
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .ok_or_else(|| MeshError::Invalid(format!("{}: not a folder name", dir.display())))?;
+    let parent = match dir.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => std::path::PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&parent).map_err(|e| MeshError::io(&parent, e))?;
+    let pid = std::process::id();
+    let partial = parent.join(format!(".{name}.partial{pid}"));
+    let old = parent.join(format!(".{name}.old{pid}"));
+    let write_all = || -> std::io::Result<()> {
+        std::fs::create_dir_all(&partial)?;
+        for (file, bytes) in files {
+            let mut f = std::fs::File::create(partial.join(file))?;
+            f.write_all(bytes)?;
+            f.sync_all()?;
+        }
+        Ok(())
+    };
+    if let Err(e) = write_all() {
+        let _ = std::fs::remove_dir_all(&partial);
+        return Err(MeshError::io(&partial, e));
+    }
+    if exists {
+        std::fs::rename(dir, &old).map_err(|e| MeshError::io(dir, e))?;
+    }
+    if let Err(e) = std::fs::rename(&partial, dir) {
+        if exists {
+            let _ = std::fs::rename(&old, dir);
+        }
+        let _ = std::fs::remove_dir_all(&partial);
+        return Err(MeshError::io(dir, e));
+    }
+    if exists {
+        std::fs::remove_dir_all(&old).map_err(|e| MeshError::io(&old, e))?;
     }
     Ok(())
 }
@@ -647,6 +727,42 @@ mod tests {
         let path = dir.join("bad.obj");
         assert!(write_obj(&path, &[h]).is_err());
         assert!(!path.exists(), "nothing half-written");
+    }
+
+    #[test]
+    fn folders_are_written_whole_and_foreign_folders_refused() {
+        let tmp = std::env::temp_dir().join(format!("bitt-folder-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&tmp);
+        let dir = tmp.join("out");
+        let files = |x: &str| {
+            vec![
+                ("a.txt".to_string(), x.as_bytes().to_vec()),
+                ("ours".to_string(), vec![]),
+            ]
+        };
+        let ours = |d: &Path| d.join("ours").is_file();
+        write_folder_atomically(&dir, &files("1"), ours).unwrap();
+        assert_eq!(std::fs::read_to_string(dir.join("a.txt")).unwrap(), "1");
+        write_folder_atomically(&dir, &files("2"), ours).unwrap();
+        assert_eq!(std::fs::read_to_string(dir.join("a.txt")).unwrap(), "2");
+        // Nothing else is left beside it.
+        assert_eq!(std::fs::read_dir(&tmp).unwrap().count(), 1);
+        // A foreign folder and a file are refused untouched.
+        let foreign = tmp.join("foreign");
+        std::fs::create_dir_all(&foreign).unwrap();
+        std::fs::write(foreign.join("notes.txt"), "mine").unwrap();
+        let e = write_folder_atomically(&foreign, &files("3"), ours).unwrap_err();
+        assert!(e.to_string().contains("not an earlier output"), "{e}");
+        assert_eq!(
+            std::fs::read_to_string(foreign.join("notes.txt")).unwrap(),
+            "mine"
+        );
+        assert!(!foreign.join("a.txt").exists());
+        let file = tmp.join("file.glb");
+        std::fs::write(&file, "x").unwrap();
+        assert!(write_folder_atomically(&file, &files("4"), ours).is_err());
+        assert_eq!(std::fs::read_to_string(&file).unwrap(), "x");
+        std::fs::remove_dir_all(&tmp).unwrap();
     }
 
     #[test]

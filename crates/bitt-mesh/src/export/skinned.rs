@@ -116,15 +116,16 @@ fn vec3(p: DVec3) -> [f32; 3] {
     [p.x as f32, p.y as f32, p.z as f32]
 }
 
-/// The 4 largest skinning weights of each vertex (`[V, NUM_JOINTS]` row-major), renormalised:
+/// The 4 largest skinning weights of each vertex (`[V, J]` row-major), renormalised:
 /// joint indices and weights per vertex, zero weights on joint 0. The `f32` weights sum to 1
 /// up to rounding (the largest takes the rest).
 pub(crate) fn top4_weights(weights: &[f64], num_vertices: usize) -> (Vec<[u8; 4]>, Vec<[f32; 4]>) {
     let mut joints = Vec::with_capacity(num_vertices);
     let mut out = Vec::with_capacity(num_vertices);
+    let n = weights.len() / num_vertices.max(1);
     for v in 0..num_vertices {
-        let row = &weights[v * NUM_JOINTS..(v + 1) * NUM_JOINTS];
-        let mut order: Vec<usize> = (0..NUM_JOINTS).collect();
+        let row = &weights[v * n..(v + 1) * n];
+        let mut order: Vec<usize> = (0..n).collect();
         order.sort_by(|&a, &b| row[b].total_cmp(&row[a]).then(a.cmp(&b)));
         let top: Vec<(usize, f64)> = order[..4]
             .iter()
@@ -483,6 +484,19 @@ pub fn skinned_vertices(
     bytes: &[u8],
     keyframe: Option<usize>,
 ) -> Result<Vec<(String, Vec<DVec3>)>, MeshError> {
+    skinned_vertices_posed(bytes, keyframe, &std::collections::HashMap::new())
+}
+
+/// [`skinned_vertices`] with the local transforms of the nodes named in `node_poses` replaced
+/// (as a runtime that drives bones by name does, e.g. three.js's `XRHandMeshModel`).
+///
+/// # Errors
+/// As [`skinned_vertices`]; a pose that is not a rotation and translation.
+pub fn skinned_vertices_posed(
+    bytes: &[u8],
+    keyframe: Option<usize>,
+    node_poses: &std::collections::HashMap<String, glam::DMat4>,
+) -> Result<Vec<(String, Vec<DVec3>)>, MeshError> {
     use glam::{DMat4, Vec4Swizzles};
     use gltf::animation::util::ReadOutputs;
     let bad = |d: &str| MeshError::InvalidParams(format!("skinned glTF: {d}"));
@@ -500,6 +514,10 @@ pub fn skinned_vertices(
     let mut trs: Vec<(DVec3, DQuat, DVec3)> = nodes
         .iter()
         .map(|n| {
+            if let Some(m) = n.name().and_then(|name| node_poses.get(name)) {
+                let (s, r, t) = m.to_scale_rotation_translation();
+                return (t, r, s);
+            }
             let (t, r, s) = n.transform().decomposed();
             (
                 DVec3::from(t.map(f64::from)),
@@ -637,7 +655,7 @@ pub fn skinned_vertices(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use glam::DVec3;
 
     use super::*;
@@ -653,7 +671,8 @@ mod tests {
         }
     }
 
-    fn params(seed: f64, side: Side) -> HandParams {
+    /// A pose, shape and translation of one hand, varied by `seed` (shared with `xr.rs`).
+    pub(crate) fn params(seed: f64, side: Side) -> HandParams {
         let s = if side == Side::Left { -1.0 } else { 1.0 };
         HandParams {
             root_rotation: rodrigues(DVec3::new(0.3 * seed, -0.2, 0.5 * s)),

@@ -83,7 +83,7 @@ pub use prior::{
     left_uv_from_right, load_html_prior, load_models, sources, texture_model,
 };
 pub use record::{INPUT_FORMAT, RealInput, RealSource, ViewRecord, files};
-pub use score::{RealScores, hand_masks, score_real};
+pub use score::{RealScores, hand_masks, score_real, silhouettes};
 pub use setup::{
     RealRunSettings, RealSetup, annotation_setup, interhand_setup, keypoint_setup, real_trainer,
     refined_real_trainer,

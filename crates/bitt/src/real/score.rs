@@ -24,18 +24,28 @@ pub struct RealScores {
 /// Silhouette masks `[H, W]` of both hands (after the shared depth test) of `hands`.
 pub fn hand_masks(trainer: &Trainer, hands: &TwoHandScene) -> Result<[Vec<f32>; 2], BittError> {
     let device = trainer.view.image.device().inner();
-    let geometry = ViewGeometry::new(&trainer.assets, hands, &device)?;
-    let t = trainer.assets.num_texels();
-    let zeros = Tensor::<2>::zeros([3, t], &device);
+    silhouettes(&trainer.assets, hands, &device)
+}
+
+/// Silhouette masks `[H, W]` of both hands of `hands` (after the shared depth test: each
+/// pixel belongs to the hand in front), without antialiasing.
+pub fn silhouettes(
+    assets: &crate::assets::HandAssets,
+    hands: &TwoHandScene,
+    device: &burn::tensor::Device,
+) -> Result<[Vec<f32>; 2], BittError> {
+    let geometry = ViewGeometry::new(assets, hands, device)?;
+    let t = assets.num_texels();
+    let zeros = Tensor::<2>::zeros([3, t], device);
     let settings = RenderSettings {
         antialias: false,
         ..RenderSettings::default()
     };
     let r = geometry.render(
-        &trainer.assets,
-        &trainer.assets.gather(&device),
+        assets,
+        &assets.gather(device),
         [zeros.clone(), zeros],
-        &LightValues::default().to_light(&device),
+        &LightValues::default().to_light(device),
         &settings,
     )?;
     let mut masks = r.masks.into_iter().map(read);
