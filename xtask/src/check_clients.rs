@@ -628,7 +628,7 @@ pub fn xr(run: &Path, screenshot: &Path, program: Option<&Path>, bitt: &Path) ->
         screenshot.display(),
         100.0 * covered
     );
-    if !(0.01..=0.9).contains(&covered) || !(spread >= 3.0 && colours >= 50.0) {
+    if !((0.01..=0.9).contains(&covered) && spread >= 3.0 && colours >= 50.0) {
         bail!(
             "xr.html as it opens: the hands cover {:.1}% of the canvas (want 1-90%), \
              brightness spread {spread:.1} (want at least 3), {colours} colours (want at least \

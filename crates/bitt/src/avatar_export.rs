@@ -234,6 +234,9 @@ pub mod xr_files {
     pub const JOINTS_FORMAT: &str = "bitt-xr-joints";
 }
 
+/// A file of a folder to write: its name and its bytes.
+pub type NamedFile = (String, Vec<u8>);
+
 /// One pose the XR files are played in: its name, which novel pose it is (`None`: the
 /// training pose) and the hands with the camera that sees them.
 #[derive(Debug, Clone)]
@@ -306,7 +309,7 @@ impl XrAvatar<'_> {
     ///
     /// # Errors
     /// A pose the avatar's hands cannot take, or textures without a UV layout.
-    pub fn files(&self) -> Result<(Vec<(String, Vec<u8>)>, XrVertexError), BittError> {
+    pub fn files(&self) -> Result<(Vec<NamedFile>, XrVertexError), BittError> {
         let skeletons = self.skeletons()?;
         let mut out = Vec::new();
         for (i, side) in Side::BOTH.into_iter().enumerate() {
