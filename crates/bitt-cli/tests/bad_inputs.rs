@@ -114,6 +114,26 @@ fn train(case: &Case, extra: &[&str]) -> Vec<String> {
     all
 }
 
+/// A tiny run of 5 iterations trained into the case's `run` folder; its path.
+fn trained_run(case: &Case) -> String {
+    let run = case.s("run");
+    let args = train(
+        case,
+        &["--iterations", "5", "--turntable", "0", "--out", &run],
+    );
+    let out = Command::new(env!("CARGO_BIN_EXE_bitt"))
+        .args(strs(&args))
+        .current_dir(&case.dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    run
+}
+
 fn strs(v: &[String]) -> Vec<&str> {
     v.iter().map(String::as_str).collect()
 }
@@ -419,21 +439,7 @@ fn photos_without_hands_are_refused_naming_the_photo() {
 #[test]
 fn xr_exports_refuse_bad_runs_and_outputs() {
     let case = Case::new("xr");
-    let run = case.s("run");
-    let args = train(
-        &case,
-        &["--iterations", "5", "--turntable", "0", "--out", &run],
-    );
-    let out = Command::new(env!("CARGO_BIN_EXE_bitt"))
-        .args(strs(&args))
-        .current_dir(&case.dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let run = trained_run(&case);
     let xr = case.s("xr");
     let export = |run: &str, convention: &str, out: &str| -> Vec<String> {
         ["export", "--run", run, "--xr", convention, "--out", out]
@@ -499,4 +505,94 @@ fn xr_exports_refuse_bad_runs_and_outputs() {
         .filter(|n| n.starts_with('.'))
         .collect();
     assert!(stray.is_empty(), "{stray:?}");
+}
+
+/// Issue 38, class 8 and 11: `export` and `render-avatar` replace only their own kind of
+/// file, the OBJ's companions never a user's `.mtl` or PNG, and a space in the OBJ's name
+/// does not break its `mtllib`.
+#[test]
+fn exports_and_renders_never_replace_users_files() {
+    let case = Case::new("users-files");
+    let run = trained_run(&case);
+    // Files of the user's whose names the commands are given.
+    std::fs::write(case.path("notes.glb"), "my notes").unwrap();
+    std::fs::write(case.path("photo.png"), "not a png of ours").unwrap();
+    std::fs::write(case.path("m.mtl"), "newmtl mine\n").unwrap();
+    case.fails(
+        &["export", "--run", &run, "--out", &case.s("notes.glb")],
+        1,
+        &["notes.glb", "untouched"],
+    );
+    case.fails(
+        &[
+            "export",
+            "--run",
+            &run,
+            "--static",
+            "--out",
+            &case.s("notes.glb"),
+        ],
+        1,
+        &["notes.glb", "untouched"],
+    );
+    case.fails(
+        &[
+            "render-avatar",
+            "--run",
+            &run,
+            "--out",
+            &case.s("photo.png"),
+        ],
+        1,
+        &["photo.png", "untouched"],
+    );
+    case.fails(
+        &[
+            "export",
+            "--run",
+            &run,
+            "--format",
+            "obj",
+            "--out",
+            &case.s("m.obj"),
+        ],
+        1,
+        &["m.mtl", "nothing was written"],
+    );
+    // Their own earlier outputs are replaced; an OBJ named with a space gets companions
+    // named without one.
+    let ok = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_bitt"))
+            .args(args)
+            .current_dir(&case.dir)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    for _ in 0..2 {
+        ok(&["export", "--run", &run, "--out", &case.s("a.glb")]);
+        ok(&["render-avatar", "--run", &run, "--out", &case.s("a.png")]);
+        ok(&[
+            "export",
+            "--run",
+            &run,
+            "--format",
+            "obj",
+            "--out",
+            &case.s("my hand.obj"),
+        ]);
+    }
+    let obj = std::fs::read_to_string(case.path("my hand.obj")).unwrap();
+    assert!(obj.contains("\nmtllib my_hand.mtl\n"), "{obj}");
+    for f in [
+        "my_hand.mtl",
+        "my_hand_left_hand.png",
+        "my_hand_right_hand.png",
+    ] {
+        assert!(case.path(f).is_file(), "{f}");
+    }
 }

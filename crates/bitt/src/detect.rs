@@ -16,7 +16,7 @@ use bitt_mesh::export::{png_bytes, write_atomically};
 use burn::tensor::Device;
 
 use crate::BittError;
-use crate::outputs::{check_own_folder, overlay_scale, rgb_image, write_files_together};
+use crate::outputs::{check_own_folder, overlay_scale, rgb_image, write_own_folder};
 
 /// The detection's record: the search's result (`bitt_detect::TwoHandDetection`) with the
 /// photo and the seconds it took.
@@ -236,10 +236,19 @@ impl DetectionFiles {
     /// # Errors
     /// A file that cannot be written.
     pub fn write_into(&self, dir: &Path) -> Result<(), BittError> {
-        write_atomically(&dir.join(KEYPOINTS_JSON), self.keypoints.as_bytes())?;
-        write_atomically(&dir.join(DETECTION_OVERLAY), &png_bytes(&self.overlay)?)?;
-        write_atomically(&dir.join(DETECTION_JSON), &record_bytes(&self.record)?)?;
+        for (name, bytes) in self.named_files()? {
+            write_atomically(&dir.join(name), &bytes)?;
+        }
         Ok(())
+    }
+
+    /// The files [`write_into`](Self::write_into) writes: (name, bytes).
+    pub fn named_files(&self) -> Result<Vec<(String, Vec<u8>)>, BittError> {
+        Ok(vec![
+            (KEYPOINTS_JSON.into(), self.keypoints.clone().into_bytes()),
+            (DETECTION_OVERLAY.into(), png_bytes(&self.overlay)?),
+            (DETECTION_JSON.into(), record_bytes(&self.record)?),
+        ])
     }
 }
 
@@ -350,23 +359,27 @@ fn draw_label(
 /// # Errors
 /// [`BittError::Invalid`] naming the folder.
 pub fn check_detect_out(out: &Path) -> Result<(), BittError> {
-    check_own_folder(out, DETECTION_JSON, "detect-hands")
+    check_own_folder(out, DETECTION_JSON, "detect-hands", &DETECT_NAMES)
 }
 
+/// The names a `detect-hands` folder holds.
+const DETECT_NAMES: [&str; 3] = [KEYPOINTS_JSON, OVERLAY, DETECTION_JSON];
+
 /// Writes a `detect-hands` folder: [`KEYPOINTS_JSON`], [`OVERLAY`] and [`DETECTION_JSON`],
-/// all three at once (a failure leaves none of them).
+/// the folder as a whole (a kill or failure leaves the earlier folder or none).
 ///
 /// # Errors
 /// A folder that is not an earlier `detect-hands` output, or a write failure.
 pub fn write_detection_folder(out: &Path, files: &DetectionFiles) -> Result<(), BittError> {
-    check_detect_out(out)?;
-    write_files_together(
+    write_own_folder(
         out,
+        DETECTION_JSON,
+        "detect-hands",
+        &DETECT_NAMES,
         &[
-            (KEYPOINTS_JSON, files.keypoints.clone().into_bytes()),
-            (OVERLAY, png_bytes(&files.overlay)?),
-            // Last: a folder with it is complete.
-            (DETECTION_JSON, record_bytes(&files.record)?),
+            (KEYPOINTS_JSON.into(), files.keypoints.clone().into_bytes()),
+            (OVERLAY.into(), png_bytes(&files.overlay)?),
+            (DETECTION_JSON.into(), record_bytes(&files.record)?),
         ],
     )
 }

@@ -30,8 +30,13 @@ pub fn rgb_image(values: &[f32], h: usize, w: usize) -> Result<image::RgbImage, 
     Ok(img)
 }
 
+/// The first 8 bytes of every PNG file.
+pub const PNG_SIGNATURE: &[u8] = b"\x89PNG\r\n\x1a\n";
+
 /// Writes `[3, H, W]` values as a PNG.
 pub fn write_png(path: &Path, values: &[f32], h: usize, w: usize) -> Result<(), BittError> {
+    // An existing file that is not a PNG (a user's, named by mistake) is not replaced.
+    bitt_mesh::export::check_replaceable(path, PNG_SIGNATURE, "PNG")?;
     let img = rgb_image(values, h, w)?;
     write_atomically(path, &png_bytes(&img)?)?;
     Ok(())
@@ -120,10 +125,54 @@ pub fn write_avatar_glb(
 
 /// Writes JSON (pretty) atomically.
 pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), BittError> {
+    write_atomically(path, &json_bytes(path, value)?)?;
+    Ok(())
+}
+
+/// `value` as the pretty JSON [`write_json`] writes (`path` names the file in the error).
+pub fn json_bytes<T: serde::Serialize>(path: &Path, value: &T) -> Result<Vec<u8>, BittError> {
     let text = serde_json::to_string_pretty(value)
         .map_err(|e| BittError::corrupt(path, format!("cannot encode JSON: {e}")))?;
-    write_atomically(path, text.as_bytes())?;
+    Ok(text.into_bytes())
+}
+
+/// `[3, H, W]` values as the PNG bytes [`write_png`] writes.
+pub fn png_file_bytes(values: &[f32], h: usize, w: usize) -> Result<Vec<u8>, BittError> {
+    Ok(png_bytes(&rgb_image(values, h, w)?)?)
+}
+
+/// Writes the output folder of a command (`fit-hands`, `refine-hands`, `detect-hands`) as a
+/// whole ([`bitt_mesh::export::write_folder_atomically`]): a kill leaves the earlier folder or
+/// the new one, never a mix of the two. `names` are all the names the command writes (the
+/// `files` are some of them), `marker` the one that marks its output. An existing folder is
+/// replaced only when it is ours ([`check_own_folder`]); anything else is refused.
+///
+/// # Errors
+/// A folder that is not ours, or a write failure (naming the path).
+pub fn write_own_folder(
+    out: &Path,
+    marker: &str,
+    command: &str,
+    names: &[&str],
+    files: &[(String, Vec<u8>)],
+) -> Result<(), BittError> {
+    check_own_folder(out, marker, command, names)?;
+    bitt_mesh::export::write_folder_atomically(out, files, |d| only_names(d, marker, names))?;
     Ok(())
+}
+
+/// Whether the folder `dir` holds `marker`, or nothing but files named in `names` (a folder
+/// an older version left half-written when it was killed).
+fn only_names(dir: &Path, marker: &str, names: &[&str]) -> bool {
+    if dir.join(marker).is_file() {
+        return true;
+    }
+    std::fs::read_dir(dir).is_ok_and(|entries| {
+        entries.flatten().all(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            e.path().is_file() && names.contains(&name.as_str())
+        })
+    })
 }
 
 /// The JSON file at `path`, or `None` when there is no file.
@@ -167,56 +216,21 @@ pub fn overlay_scale(width: usize) -> usize {
     512usize.div_ceil(width.max(1)).clamp(1, 8)
 }
 
-/// Writes `files` (name, bytes) into the folder `out` so that they appear together: they are
-/// written into a temporary folder next to `out` (`.NAME.tmpPID`), which becomes `out` when
-/// `out` does not exist yet; into an existing folder (an earlier output of the same command)
-/// they are moved one by one in the order given, so put last the file that marks a folder as
-/// complete. A failure leaves no temporary behind and, for a new folder, no folder.
-///
-/// # Errors
-/// A file or folder that cannot be written or moved.
-pub fn write_files_together(out: &Path, files: &[(&str, Vec<u8>)]) -> Result<(), BittError> {
-    let parent = match out.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => std::path::PathBuf::from("."),
-    };
-    let name = out
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "out".into());
-    std::fs::create_dir_all(&parent).map_err(|e| BittError::io(&parent, e))?;
-    let tmp = parent.join(format!(".{name}.tmp{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&tmp);
-    let result = (|| -> Result<(), BittError> {
-        std::fs::create_dir(&tmp).map_err(|e| BittError::io(&tmp, e))?;
-        for (file, bytes) in files {
-            let path = tmp.join(file);
-            let mut f = std::fs::File::create(&path).map_err(|e| BittError::io(&path, e))?;
-            std::io::Write::write_all(&mut f, bytes).map_err(|e| BittError::io(&path, e))?;
-            f.sync_all().map_err(|e| BittError::io(&path, e))?;
-        }
-        if !out.exists() {
-            return std::fs::rename(&tmp, out).map_err(|e| BittError::io(out, e));
-        }
-        for (file, _) in files {
-            let to = out.join(file);
-            std::fs::rename(tmp.join(file), &to).map_err(|e| BittError::io(&to, e))?;
-        }
-        Ok(())
-    })();
-    let _ = std::fs::remove_dir_all(&tmp);
-    result
-}
-
 /// Refuses an output folder that exists, is not empty and holds no `marker` file (so is not an
-/// earlier output of `command`): nothing of the user's is overwritten.
+/// earlier output of `command`) nor only files of the command's `names`: nothing of the
+/// user's is overwritten.
 ///
 /// # Errors
 /// [`BittError::Invalid`] naming the folder.
-pub fn check_own_folder(out: &Path, marker: &str, command: &str) -> Result<(), BittError> {
+pub fn check_own_folder(
+    out: &Path,
+    marker: &str,
+    command: &str,
+    names: &[&str],
+) -> Result<(), BittError> {
     if out.is_dir() {
         let mut entries = std::fs::read_dir(out).map_err(|e| BittError::io(out, e))?;
-        if entries.next().is_some() && !out.join(marker).is_file() {
+        if entries.next().is_some() && !only_names(out, marker, names) {
             return Err(BittError::Invalid(format!(
                 "{}: the folder exists and is not a {command} output (no {marker}); choose \
                  another --out",
@@ -235,6 +249,57 @@ pub fn check_own_folder(out: &Path, marker: &str, command: &str) -> Result<(), B
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 38, class 9: a command's folder appears whole, replaces its own earlier output
+    /// as a whole (no new `hands.json` beside an old `fit.json`), takes over a folder an
+    /// older version left half-written, and refuses a folder of the user's.
+    #[test]
+    fn command_folders_are_written_whole() {
+        let tmp = std::env::temp_dir().join(format!("bitt-own-folder-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&tmp);
+        let out = tmp.join("fit");
+        const NAMES: [&str; 3] = ["hands.json", "overlay.png", "fit.json"];
+        let files = |tag: &str, with_overlay: bool| {
+            let mut f = vec![("hands.json".to_string(), tag.as_bytes().to_vec())];
+            if with_overlay {
+                f.push(("overlay.png".into(), b"png".to_vec()));
+            }
+            f.push(("fit.json".into(), tag.as_bytes().to_vec()));
+            f
+        };
+        let listing = |d: &Path| {
+            let mut n: Vec<String> = std::fs::read_dir(d)
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            n.sort();
+            n
+        };
+        write_own_folder(&out, "fit.json", "fit-hands", &NAMES, &files("one", true)).unwrap();
+        assert_eq!(listing(&out), ["fit.json", "hands.json", "overlay.png"]);
+        // Its own output is replaced as a whole: no file of the earlier one stays.
+        write_own_folder(&out, "fit.json", "fit-hands", &NAMES, &files("two", false)).unwrap();
+        assert_eq!(listing(&out), ["fit.json", "hands.json"]);
+        assert_eq!(std::fs::read(out.join("fit.json")).unwrap(), b"two");
+        assert_eq!(listing(&tmp), ["fit"], "no temporary folder is left");
+        // A folder an older version left with hands.json only is taken over.
+        std::fs::remove_file(out.join("fit.json")).unwrap();
+        check_own_folder(&out, "fit.json", "fit-hands", &NAMES).unwrap();
+        write_own_folder(&out, "fit.json", "fit-hands", &NAMES, &files("three", true)).unwrap();
+        assert_eq!(std::fs::read(out.join("hands.json")).unwrap(), b"three");
+        // A folder with anything else in it is the user's: refused, untouched.
+        let mine = tmp.join("mine");
+        std::fs::create_dir_all(&mine).unwrap();
+        std::fs::write(mine.join("hands.json"), "mine").unwrap();
+        std::fs::write(mine.join("notes.txt"), "mine").unwrap();
+        let e = write_own_folder(&mine, "fit.json", "fit-hands", &NAMES, &files("x", true))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("not a fit-hands output"), "{e}");
+        assert_eq!(std::fs::read(mine.join("hands.json")).unwrap(), b"mine");
+        assert_eq!(listing(&mine), ["hands.json", "notes.txt"]);
+        std::fs::remove_dir_all(&tmp).unwrap();
+    }
 
     #[test]
     fn base64_matches_rfc4648_vectors() {

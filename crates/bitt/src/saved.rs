@@ -325,8 +325,16 @@ impl SavedRun {
             clip,
         };
         match kind {
-            ExportKind::Rigged => write_atomically(out, &files.rigged_glb()?)?,
-            ExportKind::Static => write_atomically(out, &files.static_glb()?)?,
+            ExportKind::Rigged | ExportKind::Static => {
+                // A file the user named that is not a glTF binary is not replaced.
+                bitt_mesh::export::check_replaceable(out, b"glTF", "glTF binary (.glb)")?;
+                let bytes = if kind == ExportKind::Rigged {
+                    files.rigged_glb()?
+                } else {
+                    files.static_glb()?
+                };
+                write_atomically(out, &bytes)?
+            }
             ExportKind::Obj => files.write_obj(out)?,
         }
         Ok(())

@@ -44,6 +44,18 @@ pub struct ExportHand<'a> {
 /// Writes `bytes` to `path` through a temporary file in the same folder and a rename, so a
 /// crash or a full disk never leaves a half-written file under the final name.
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), MeshError> {
+    let tmp = write_temporary(path, bytes)?;
+    if let Err(e) = std::fs::rename(&tmp, path) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(MeshError::io(path, e));
+    }
+    Ok(())
+}
+
+/// Writes `bytes` to a hidden temporary file beside `path` (`.NAME.tmpPID`, synced) and
+/// returns it; the caller renames it into place. Temporaries of `path` left by a writer that
+/// was killed (their process is gone) are removed first.
+fn write_temporary(path: &Path, bytes: &[u8]) -> Result<std::path::PathBuf, MeshError> {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => std::path::PathBuf::from("."),
@@ -53,16 +65,75 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), MeshError> {
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "out".into());
+    remove_dead_writers_temporaries(&dir, &name);
     let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
     let result = (|| {
         let mut f = std::fs::File::create(&tmp)?;
         f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
+        f.sync_all()
     })();
     if let Err(e) = result {
         let _ = std::fs::remove_file(&tmp);
         return Err(MeshError::io(path, e));
+    }
+    Ok(tmp)
+}
+
+/// Removes `dir/.NAME.tmpPID` files whose process no longer runs (a writer killed before
+/// its rename), in any folder (unlike [`remove_stale_temporaries`], for folders of ours, it
+/// takes only one name's and only a dead process's). Only where processes can be looked up
+/// (`/proc`); elsewhere nothing is removed.
+fn remove_dead_writers_temporaries(dir: &Path, name: &str) {
+    let proc = Path::new("/proc/self");
+    if !proc.exists() {
+        return;
+    }
+    let prefix = format!(".{name}.tmp");
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let file = entry.file_name().to_string_lossy().into_owned();
+        let Some(pid) = file.strip_prefix(&prefix) else {
+            continue;
+        };
+        let alive = Path::new("/proc").join(pid).exists();
+        if !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit()) && !alive {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
+}
+
+/// The first line of every text file the writers here make (OBJ, MTL): how a later export
+/// tells its own earlier output from a user's file of the same name.
+pub const WRITTEN_BY: &str = "# written by bitt (two-hand texture reconstruction)";
+
+/// Refuses `path` as an output unless it is missing or already a file of the kind about to
+/// be written, whose first bytes are `magic` (`b"glTF"`, PNG's signature, [`WRITTEN_BY`]):
+/// an existing file of another kind, given as the output by mistake, is left alone.
+///
+/// # Errors
+/// [`MeshError::Invalid`] naming the path and what it is not; an I/O error reading it.
+pub fn check_replaceable(path: &Path, magic: &[u8], kind: &str) -> Result<(), MeshError> {
+    if path.is_dir() {
+        return Err(MeshError::Invalid(format!(
+            "{}: is a folder, not a {kind} file",
+            path.display()
+        )));
+    }
+    if !path.exists() {
+        return Ok(());
+    }
+    let mut head = vec![0u8; magic.len()];
+    let read = std::fs::File::open(path)
+        .and_then(|mut f| std::io::Read::read(&mut f, &mut head))
+        .map_err(|e| MeshError::io(path, e))?;
+    if read < magic.len() || head != magic {
+        return Err(MeshError::Invalid(format!(
+            "{}: exists and is not a {kind} file written by this tool; it was left untouched \
+             (choose another output name)",
+            path.display()
+        )));
     }
     Ok(())
 }
@@ -210,7 +281,7 @@ fn check_hand(h: &ExportHand) -> Result<(), MeshError> {
 /// hand, named after it), as written by [`mtl_text`].
 pub fn obj_text(hands: &[ExportHand], mtllib: Option<&str>) -> Result<String, MeshError> {
     use std::fmt::Write as _;
-    let mut s = String::from("# written by bitt (two-hand texture reconstruction)\n");
+    let mut s = format!("{WRITTEN_BY}\n");
     if let Some(m) = mtllib {
         let _ = writeln!(s, "mtllib {m}");
     }
@@ -263,7 +334,7 @@ pub fn obj_text(hands: &[ExportHand], mtllib: Option<&str>) -> Result<String, Me
 
 /// A material library giving each hand (by name) its texture file, if it has one.
 pub fn mtl_text(materials: &[(&str, Option<&str>)]) -> String {
-    let mut s = String::new();
+    let mut s = format!("{WRITTEN_BY}\n");
     for (name, texture) in materials {
         s.push_str(&format!(
             "newmtl {name}\nKd 1.0 1.0 1.0\nKa 0 0 0\nKs 0 0 0\nillum 1\n"
@@ -276,35 +347,128 @@ pub fn mtl_text(materials: &[(&str, Option<&str>)]) -> String {
     s
 }
 
-/// Writes `hands` as one OBJ file (atomically). Hands with a texture get a `.mtl` beside the
-/// OBJ and their texture saved as `<obj stem>_<hand name>.png`.
+/// Writes `hands` as one OBJ file. Hands with a texture get a `.mtl` beside the OBJ and their
+/// texture saved as `<stem>_<hand name>.png`, where `<stem>` is the OBJ's file stem with
+/// whitespace replaced by `_` (OBJ's `mtllib` and MTL's `map_Kd` split names at spaces).
+///
+/// The files appear together: each is written to a temporary file first, then all are
+/// renamed into place, the OBJ last. A file of those names that exists must be an earlier
+/// output of this writer (an OBJ or MTL starting with [`WRITTEN_BY`], a PNG that such an
+/// MTL names); anything else is refused before anything is written.
+///
+/// # Errors
+/// [`MeshError::Invalid`] for a user's file in the way (named) or bad hands; an I/O error
+/// naming the path.
 pub fn write_obj(path: &Path, hands: &[ExportHand]) -> Result<(), MeshError> {
     let textured = hands.iter().any(|h| h.texture.is_some());
-    let stem = path
+    let stem: String = path
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "hands".into());
+        .unwrap_or_else(|| "hands".into())
+        .chars()
+        .map(|c| if c.is_whitespace() { '_' } else { c })
+        .collect();
     let dir = path.parent().unwrap_or(Path::new(""));
+    // Every file, in the order they are renamed into place (the OBJ last).
+    let mut files: Vec<(std::path::PathBuf, Vec<u8>)> = Vec::new();
     let mut mtllib = None;
     if textured {
         let mut materials = Vec::new();
-        let mut names = Vec::new();
         for h in hands {
             let file = h.texture.map(|_| format!("{stem}_{}.png", h.name));
             if let (Some(file), Some(tex)) = (&file, h.texture) {
-                write_atomically(&dir.join(file), &png_bytes(tex)?)?;
+                files.push((dir.join(file), png_bytes(tex)?));
             }
-            names.push((h.name, file));
+            materials.push((h.name, file));
         }
-        for (n, f) in &names {
-            materials.push((*n, f.as_deref()));
-        }
+        let materials: Vec<(&str, Option<&str>)> =
+            materials.iter().map(|(n, f)| (*n, f.as_deref())).collect();
         let mtl = format!("{stem}.mtl");
-        write_atomically(&dir.join(&mtl), mtl_text(&materials).as_bytes())?;
+        files.push((dir.join(&mtl), mtl_text(&materials).into_bytes()));
         mtllib = Some(mtl);
     }
-    let text = obj_text(hands, mtllib.as_deref())?;
-    write_atomically(path, text.as_bytes())
+    files.push((
+        path.to_path_buf(),
+        obj_text(hands, mtllib.as_deref())?.into_bytes(),
+    ));
+    check_obj_outputs(path, mtllib.as_deref().map(|m| dir.join(m)), &files)?;
+    write_all_or_none(&files)
+}
+
+/// Refuses the OBJ writer's `files` when one exists that it did not write (see
+/// [`write_obj`]): the OBJ and the MTL must start with [`WRITTEN_BY`], a PNG must be named by
+/// the existing MTL (`map_Kd`).
+fn check_obj_outputs(
+    obj: &Path,
+    mtl: Option<std::path::PathBuf>,
+    files: &[(std::path::PathBuf, Vec<u8>)],
+) -> Result<(), MeshError> {
+    let ours = |p: &Path| -> Result<bool, MeshError> {
+        let text = std::fs::read(p).map_err(|e| MeshError::io(p, e))?;
+        Ok(text.starts_with(WRITTEN_BY.as_bytes()))
+    };
+    let listed: Vec<String> = match &mtl {
+        Some(m) if m.is_file() && ours(m)? => std::fs::read_to_string(m)
+            .map_err(|e| MeshError::io(m, e))?
+            .lines()
+            .filter_map(|l| l.strip_prefix("map_Kd "))
+            .map(str::to_string)
+            .collect(),
+        _ => Vec::new(),
+    };
+    let mut foreign = Vec::new();
+    for (p, _) in files {
+        if !p.exists() {
+            continue;
+        }
+        let is_text = p == obj || Some(p) == mtl.as_ref();
+        let mine = if p.is_dir() {
+            false
+        } else if is_text {
+            ours(p)?
+        } else {
+            let name = p.file_name().map(|n| n.to_string_lossy().into_owned());
+            name.is_some_and(|n| listed.contains(&n))
+        };
+        if !mine {
+            foreign.push(p.display().to_string());
+        }
+    }
+    if !foreign.is_empty() {
+        return Err(MeshError::Invalid(format!(
+            "writing {} would replace {}, which this tool did not write; nothing was written \
+             (choose another output name)",
+            obj.display(),
+            foreign.join(", ")
+        )));
+    }
+    Ok(())
+}
+
+/// Writes `files` (path, bytes) so that they appear together: all to temporary files first
+/// (nothing renamed if one fails, the temporaries removed), then renamed in order.
+pub fn write_all_or_none(files: &[(std::path::PathBuf, Vec<u8>)]) -> Result<(), MeshError> {
+    let mut temporaries = Vec::new();
+    for (p, bytes) in files {
+        match write_temporary(p, bytes) {
+            Ok(t) => temporaries.push(t),
+            Err(e) => {
+                for t in &temporaries {
+                    let _ = std::fs::remove_file(t);
+                }
+                return Err(e);
+            }
+        }
+    }
+    for (k, ((p, _), t)) in files.iter().zip(&temporaries).enumerate() {
+        if let Err(e) = std::fs::rename(t, p) {
+            for t in &temporaries[k..] {
+                let _ = std::fs::remove_file(t);
+            }
+            return Err(MeshError::io(p, e));
+        }
+    }
+    Ok(())
 }
 
 /// PNG encoding of an RGB image.
@@ -727,6 +891,118 @@ mod tests {
         let path = dir.join("bad.obj");
         assert!(write_obj(&path, &[h]).is_err());
         assert!(!path.exists(), "nothing half-written");
+    }
+
+    #[test]
+    fn obj_outputs_never_replace_users_files_and_name_companions_without_spaces() {
+        let (v, f, uv) = quad();
+        let tex = image::RgbImage::from_pixel(4, 4, image::Rgb([200, 150, 120]));
+        let hands = [
+            ExportHand {
+                name: "left_hand",
+                vertices: &v,
+                faces: &f,
+                uv: Some(&uv),
+                texture: Some(&tex),
+            },
+            ExportHand {
+                name: "right_hand",
+                vertices: &v,
+                faces: &f,
+                uv: Some(&uv),
+                texture: Some(&tex),
+            },
+        ];
+        let tmp = std::env::temp_dir().join(format!("bitt-obj-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&tmp);
+        std::fs::create_dir_all(&tmp).unwrap();
+        let listing = || {
+            let mut names: Vec<String> = std::fs::read_dir(&tmp)
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            names.sort();
+            names
+        };
+
+        // A space in the name: the companions' names have none (OBJ splits `mtllib` there).
+        let obj = tmp.join("my hand.obj");
+        write_obj(&obj, &hands).unwrap();
+        let text = std::fs::read_to_string(&obj).unwrap();
+        assert!(text.contains("\nmtllib my_hand.mtl\n"), "{text}");
+        let mtl = std::fs::read_to_string(tmp.join("my_hand.mtl")).unwrap();
+        assert!(mtl.starts_with(WRITTEN_BY));
+        assert!(mtl.contains("map_Kd my_hand_left_hand.png\n"), "{mtl}");
+        assert_eq!(
+            listing(),
+            [
+                "my hand.obj",
+                "my_hand.mtl",
+                "my_hand_left_hand.png",
+                "my_hand_right_hand.png"
+            ]
+        );
+        // Written again over its own output: fine.
+        write_obj(&obj, &hands).unwrap();
+
+        // A user's own MTL, PNG or OBJ of those names: refused, nothing written or touched.
+        for (user_file, bytes) in [
+            ("m.mtl", &b"newmtl mine\n"[..]),
+            ("m_right_hand.png", &b"\x89PNG my picture"[..]),
+            ("m.obj", &b"o my_mesh\nv 0 0 0\n"[..]),
+        ] {
+            let before = listing();
+            std::fs::write(tmp.join(user_file), bytes).unwrap();
+            let e = write_obj(&tmp.join("m.obj"), &hands)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains(user_file) && e.contains("nothing was written"),
+                "{e}"
+            );
+            assert_eq!(std::fs::read(tmp.join(user_file)).unwrap(), bytes);
+            let mut expected = before.clone();
+            expected.push(user_file.to_string());
+            expected.sort();
+            assert_eq!(listing(), expected, "only the user's file is new");
+            std::fs::remove_file(tmp.join(user_file)).unwrap();
+        }
+
+        // A writer killed before its rename left a temporary: the next write removes it (no
+        // process has that id: ids are below 2^22 on Linux).
+        let stale = tmp.join(".my hand.obj.tmp4999999");
+        std::fs::write(&stale, b"half").unwrap();
+        write_obj(&obj, &hands).unwrap();
+        if Path::new("/proc/self").exists() {
+            assert!(!stale.exists(), "a dead writer's temporary is removed");
+        }
+        std::fs::remove_dir_all(&tmp).unwrap();
+    }
+
+    #[test]
+    fn outputs_replace_only_files_of_their_kind() {
+        let tmp = std::env::temp_dir().join(format!("bitt-replace-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&tmp);
+        std::fs::create_dir_all(&tmp).unwrap();
+        let (glb, notes) = (tmp.join("a.glb"), tmp.join("notes.glb"));
+        check_replaceable(&glb, b"glTF", "glTF").unwrap();
+        std::fs::write(&glb, b"glTF\x02\0\0\0").unwrap();
+        check_replaceable(&glb, b"glTF", "glTF").unwrap();
+        std::fs::write(&notes, b"my notes").unwrap();
+        let e = check_replaceable(&notes, b"glTF", "glTF")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("notes.glb") && e.contains("untouched"), "{e}");
+        std::fs::write(&notes, b"gl").unwrap();
+        assert!(
+            check_replaceable(&notes, b"glTF", "glTF").is_err(),
+            "shorter than the magic"
+        );
+        assert!(
+            check_replaceable(&tmp, b"glTF", "glTF").is_err(),
+            "a folder"
+        );
+        std::fs::remove_dir_all(&tmp).unwrap();
     }
 
     #[test]

@@ -367,38 +367,50 @@ pub fn keypoint_overlay(
 /// # Errors
 /// [`BittError::Invalid`] naming the folder.
 pub fn check_fit_out(out: &Path) -> Result<(), BittError> {
-    crate::outputs::check_own_folder(out, FIT_JSON, "fit-hands")
+    crate::outputs::check_own_folder(out, FIT_JSON, "fit-hands", &FIT_NAMES)
 }
 
-/// Writes `hands.json`, `fit.json` and `overlay.png` into `out` (created if missing), for
-/// a mirrored photo the un-mirrored `image.png` the hands are for, and for detected keypoints
-/// the detection's files (`detection.json`, `keypoints.json`, `detection_overlay.png`). A
-/// folder that exists, is not empty and holds no `fit.json` is not ours and is refused.
+/// The names a `fit-hands` folder may hold.
+const FIT_NAMES: [&str; 7] = [
+    HANDS_JSON,
+    UNMIRRORED_IMAGE,
+    crate::run::files::REFINE_OVERLAY,
+    FIT_JSON,
+    crate::detect::KEYPOINTS_JSON,
+    crate::detect::DETECTION_OVERLAY,
+    crate::detect::DETECTION_JSON,
+];
+
+/// Writes `hands.json`, `fit.json` and `overlay.png` as the folder `out`, for a mirrored
+/// photo the un-mirrored `image.png` the hands are for, and for detected keypoints the
+/// detection's files (`detection.json`, `keypoints.json`, `detection_overlay.png`). The
+/// folder is written as a whole (a kill leaves the earlier folder or the new one); a folder
+/// that exists, is not empty and is not an earlier `fit-hands` output is refused.
 ///
 /// # Errors
-/// A foreign folder, or a write failure (each file is written atomically).
+/// A foreign folder, or a write failure.
 pub fn write_fit_outputs(out: &Path, fit: &PhotoFit) -> Result<(), BittError> {
-    check_fit_out(out)?;
-    std::fs::create_dir_all(out).map_err(|e| BittError::io(out, e))?;
+    use crate::outputs::{json_bytes, png_file_bytes};
     let text = bitt_mesh::annotation::hands_json(&fit.hands, &fit.models)?;
-    bitt_mesh::export::write_atomically(&out.join(HANDS_JSON), text.as_bytes())?;
+    let mut files = vec![(HANDS_JSON.to_string(), text.into_bytes())];
     if fit.mirrored {
         let (w, h) = (
             fit.hands.camera.width as usize,
             fit.hands.camera.height as usize,
         );
-        crate::outputs::write_png(&out.join(UNMIRRORED_IMAGE), &fit.image, h, w)?;
+        files.push((UNMIRRORED_IMAGE.into(), png_file_bytes(&fit.image, h, w)?));
     }
     let [oh, ow] = fit.overlay.1;
-    crate::outputs::write_png(
-        &out.join(crate::run::files::REFINE_OVERLAY),
-        &fit.overlay.0,
-        oh,
-        ow,
-    )?;
+    files.push((
+        crate::run::files::REFINE_OVERLAY.into(),
+        png_file_bytes(&fit.overlay.0, oh, ow)?,
+    ));
     if let Some(d) = &fit.detection {
-        d.write_into(out)?;
+        files.extend(d.named_files()?);
     }
-    // fit.json last: a folder with it is complete.
-    crate::outputs::write_json(&out.join(FIT_JSON), &fit.record())
+    files.push((
+        FIT_JSON.into(),
+        json_bytes(&out.join(FIT_JSON), &fit.record())?,
+    ));
+    crate::outputs::write_own_folder(out, FIT_JSON, "fit-hands", &FIT_NAMES, &files)
 }

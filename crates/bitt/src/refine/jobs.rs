@@ -426,14 +426,27 @@ pub fn refine_photo_hands(
 /// # Errors
 /// [`BittError::Invalid`] naming the folder.
 pub fn check_refine_out(out: &Path) -> Result<(), BittError> {
-    crate::outputs::check_own_folder(out, crate::run::files::REFINE, "refine-hands")
+    crate::outputs::check_own_folder(
+        out,
+        crate::run::files::REFINE,
+        "refine-hands",
+        &REFINE_NAMES,
+    )
 }
 
-/// Writes `hands.json`, `refine.json` and `overlay.png` into `out` (created if missing). A
-/// folder that exists, is not empty and holds no `refine.json` is not ours and is refused.
+/// The names a `refine-hands` folder holds.
+const REFINE_NAMES: [&str; 3] = [
+    HANDS_JSON,
+    crate::run::files::REFINE_OVERLAY,
+    crate::run::files::REFINE,
+];
+
+/// Writes `hands.json`, `refine.json` and `overlay.png` as the folder `out`, as a whole (a
+/// kill leaves the earlier folder or the new one). A folder that exists, is not empty and is
+/// not an earlier `refine-hands` output is refused.
 ///
 /// # Errors
-/// A foreign folder, or a write failure (each file is written atomically).
+/// A foreign folder, or a write failure.
 pub fn write_refine_outputs(
     out: &Path,
     models: &HandPair,
@@ -441,9 +454,14 @@ pub fn write_refine_outputs(
     record: &serde_json::Value,
     overlay: &(Vec<f32>, [usize; 2]),
 ) -> Result<(), BittError> {
-    check_refine_out(out)?;
-    std::fs::create_dir_all(out).map_err(|e| BittError::io(out, e))?;
+    use crate::outputs::{json_bytes, png_file_bytes};
+    use crate::run::files::{REFINE, REFINE_OVERLAY};
     let text = bitt_mesh::annotation::hands_json(hands, models)?;
-    bitt_mesh::export::write_atomically(&out.join(HANDS_JSON), text.as_bytes())?;
-    crate::run::write_refinement(out, record, &overlay.0, overlay.1)
+    let [h, w] = overlay.1;
+    let files = [
+        (HANDS_JSON.to_string(), text.into_bytes()),
+        (REFINE_OVERLAY.into(), png_file_bytes(&overlay.0, h, w)?),
+        (REFINE.into(), json_bytes(&out.join(REFINE), record)?),
+    ];
+    crate::outputs::write_own_folder(out, REFINE, "refine-hands", &REFINE_NAMES, &files)
 }
