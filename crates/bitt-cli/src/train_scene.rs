@@ -762,6 +762,32 @@ mod tests {
         );
         let again = report();
         assert!(again.contains("Hand detection") && again.contains(&embedded));
+        // The detected keypoints without the right hand: the message says the file has no
+        // right hand (issue 38), and no run folder is made.
+        let mut left_only = read("keypoints.json");
+        left_only["right"] = serde_json::Value::Null;
+        let kp = dir.join("left_only.json");
+        std::fs::write(&kp, left_only.to_string()).unwrap();
+        let other = dir.join("run-left-only");
+        let e = format!(
+            "{:#}",
+            run(&args(&[
+                "--image",
+                s(&img),
+                "--keypoints",
+                s(&kp),
+                "--cache",
+                s(&cache),
+                "--out",
+                s(&other),
+            ]))
+            .unwrap_err()
+        );
+        assert!(
+            e.contains("left_only.json") && e.contains("the file has no right hand"),
+            "{e}"
+        );
+        assert!(!other.exists(), "a refused run made {}", other.display());
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -376,8 +376,38 @@ pub fn bitt_annotation_from_bytes(
     path: &Path,
     image_size: (u32, u32),
 ) -> Result<TwoHandScene, MeshError> {
-    if bytes.iter().find(|b| !b.is_ascii_whitespace()) == Some(&b'{') {
+    let first = bytes.iter().find(|b| !b.is_ascii_whitespace()).copied();
+    let Some(first) = first else {
+        return Err(MeshError::format(
+            path,
+            "the file is empty: neither an annotation pickle nor a hands.json",
+        ));
+    };
+    if first == b'{' {
         return scene_from_hands_json(bytes, path);
+    }
+    // JSON that is not an object (no pickle starts with these bytes), or any `.json` file:
+    // said as such, not reported as a broken pickle.
+    let json_name = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("json"));
+    if json_name || first == b'[' || first == b'"' || first == b'-' || first.is_ascii_digit() {
+        let what = match serde_json::from_slice::<serde_json::Value>(bytes) {
+            Ok(serde_json::Value::Array(_)) => "JSON holding an array".to_string(),
+            Ok(serde_json::Value::String(_)) => "JSON holding a string".into(),
+            Ok(serde_json::Value::Number(_)) => "JSON holding a number".into(),
+            Ok(serde_json::Value::Bool(_)) => "JSON holding a boolean".into(),
+            Ok(serde_json::Value::Null) => "JSON holding null".into(),
+            Ok(serde_json::Value::Object(_)) => "a JSON object".into(),
+            Err(e) => format!("not valid JSON ({e})"),
+        };
+        return Err(MeshError::format(
+            path,
+            format!(
+                "{what}; a hands.json is an object with \"format\": \"{HANDS_JSON_FORMAT}\" \
+                 (as refine-hands and fit-hands write it)"
+            ),
+        ));
     }
     let root = bitt_pickle::from_bytes(bytes, &path.display().to_string())?;
     scene_from_bitt_annotation(&root, path, image_size)
@@ -764,6 +794,31 @@ pub fn scene_from_interhand_json(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 38, class 10: an empty file or JSON that is not a hands.json is said to be so,
+    /// not reported as a broken pickle.
+    #[test]
+    fn empty_and_non_object_json_annotations_are_named_as_such() {
+        for (name, bytes, expect) in [
+            ("a.json", &b""[..], "the file is empty"),
+            ("a.pkl", &b"  \n"[..], "the file is empty"),
+            ("a.json", &b"[1, 2]"[..], "JSON holding an array"),
+            ("a.dat", &b"[1, 2]"[..], "JSON holding an array"),
+            ("a.json", &b"42"[..], "JSON holding a number"),
+            ("a.json", &b"\"hands\""[..], "JSON holding a string"),
+            ("a.json", &b"null"[..], "JSON holding null"),
+            ("a.json", &b"nul"[..], "not valid JSON"),
+        ] {
+            let e = bitt_annotation_from_bytes(bytes, Path::new(name), (256, 256))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains(name) && e.contains(expect),
+                "{name} {bytes:?}: {e}"
+            );
+            assert!(!e.contains("pickle data") && !e.contains("opcode"), "{e}");
+        }
+    }
 
     /// A one-hand scene writes an OBJ with only that hand and a GLB beside it.
     #[test]

@@ -229,8 +229,17 @@ pub fn keypoint_setup(
     let named = keypoints.unwrap_or(image);
     for side in Side::BOTH {
         if fit.hands.hand(side).is_none() {
+            let points = match side {
+                Side::Left => &fit.keypoints.left,
+                Side::Right => &fit.keypoints.right,
+            };
+            let why = match (points, keypoints) {
+                (None, Some(_)) => format!("the file has no {side} hand"),
+                (None, None) => format!("no {side} hand was found in the photo"),
+                (Some(_), _) => format!("the {side} hand has too few keypoints to be fitted"),
+            };
             return Err(BittError::Invalid(format!(
-                "{}: the {side} hand has too few keypoints to be fitted; BiTT needs both hands",
+                "{}: {why}; BiTT needs both hands",
                 named.display()
             )));
         }
