@@ -30,7 +30,11 @@ pub fn annotation_pose(
     let b = hands_box(&hands, models)
         .map_err(|e| BittError::Invalid(format!("{}: {e}", path.display())))?;
     let camera = fit_camera(&hands.camera, Some(reference_crop_box(b)), size)?;
-    Ok(TwoHandScene { camera, ..hands })
+    let scene = TwoHandScene { camera, ..hands };
+    // As for a training view: a hand kilometres wide or away (a huge shape or translation)
+    // is a broken file, not a pose (issue 38).
+    crate::real::check_hand_placement(&scene, models, path)?;
+    Ok(scene)
 }
 
 /// Names of the procedural pose families (`clasp`, `interlaced`, `palm_on_back`, ...).
@@ -132,5 +136,34 @@ mod tests {
         );
         let turned = orbit_hands(&s, &models, 0.5, 0.0).unwrap();
         assert_ne!(turned.camera, s.camera);
+    }
+
+    /// Issue 38, class 6: a pose file whose hand is huge or far away is refused, naming the
+    /// file and the hand; the same file with sane values is a pose.
+    #[test]
+    fn absurd_pose_files_are_refused() {
+        let models = procedural_pair();
+        let betas = vec![0.0; 10];
+        let s = procedural_pose(&models, PoseFamily::Clasp, [&betas, &betas], 1, 64).unwrap();
+        let dir = std::env::temp_dir().join(format!("bitt-absurd-pose-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let write = |name: &str, scene: &TwoHandScene| {
+            let path = dir.join(name);
+            let text = bitt_mesh::annotation::hands_json(scene, &models).unwrap();
+            std::fs::write(&path, text).unwrap();
+            path
+        };
+        let sane = write("sane.json", &s);
+        annotation_pose(&sane, &models, 64).unwrap();
+        let mut far = s.clone();
+        far.left.as_mut().unwrap().trans = DVec3::new(0.0, 0.0, 1e20);
+        let mut huge = s.clone();
+        huge.right.as_mut().unwrap().betas = vec![5e4; 10];
+        for (name, scene, hand) in [("far.json", far, "left"), ("huge.json", huge, "right")] {
+            let path = write(name, &scene);
+            let e = annotation_pose(&path, &models, 64).unwrap_err().to_string();
+            assert!(e.contains(name) && e.contains(hand), "{name}: {e}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
