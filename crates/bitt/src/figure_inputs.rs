@@ -146,6 +146,22 @@ pub fn read_light(arg: &str) -> Result<LightValues, BittError> {
     light.validate().map_err(|e| {
         BittError::Invalid(format!("{source}: {e} (every light value must be finite)"))
     })?;
+    // Light adds to the image: a negative colour, or none at all, renders black (issue 38).
+    let colours = [
+        ("ambient", light.ambient),
+        ("diffuse", light.diffuse),
+        ("specular", light.specular),
+    ];
+    if let Some((name, part)) = colours.iter().find(|(_, p)| p.iter().any(|&x| x < 0.0)) {
+        return Err(BittError::Invalid(format!(
+            "{source}: {name} is {part:?}; a light's colours are 0 or more"
+        )));
+    }
+    if colours.iter().all(|(_, p)| p.iter().all(|&x| x == 0.0)) {
+        return Err(BittError::Invalid(format!(
+            "{source}: ambient, diffuse and specular are all 0: that light renders black"
+        )));
+    }
     Ok(light)
 }
 
@@ -272,6 +288,21 @@ mod tests {
             .unwrap_err(),
         );
         assert!(e.contains("ambient") && e.contains("finite"), "{e}");
+        // Negative colours, or no light at all, would render black (issue 38, class 6).
+        let e = error_chain(
+            &read_light(
+                r#"{"ambient":[0.5,0.5,0.5],"diffuse":[0.1,-0.1,0.1],"specular":[0,0,0],"location":[0,1,0]}"#,
+            )
+            .unwrap_err(),
+        );
+        assert!(e.contains("diffuse") && e.contains("0 or more"), "{e}");
+        let e = error_chain(
+            &read_light(
+                r#"{"ambient":[0,0,0],"diffuse":[0,0,0],"specular":[0,0,0],"location":[0,1,0]}"#,
+            )
+            .unwrap_err(),
+        );
+        assert!(e.contains("renders black"), "{e}");
         let e = error_chain(&read_light("/nonexistent/light.json").unwrap_err());
         assert!(e.contains("/nonexistent/light.json"), "{e}");
         // Inline JSON that is not a light object is named as --light, not read as a file.

@@ -38,6 +38,50 @@ pub struct KeypointSource {
     pub mirrored: bool,
 }
 
+/// The focal lengths `--intrinsics` may give, as multiples of the photo's long side: a
+/// fisheye-wide 0.05 to a telephoto 100. Outside, the fit's residuals are meaningless
+/// (infinite at 1e-30) rather than large (issue 38).
+pub const FOCAL_RANGE_OF_LONG_SIDE: [f64; 2] = [0.05, 100.0];
+
+/// Checks `--intrinsics` against the photo (`[w, h]` pixels): focal lengths within
+/// [`FOCAL_RANGE_OF_LONG_SIDE`], the principal point within the image widened by its own size
+/// on every side (a crop's principal point may lie off its centre, not a photo away).
+///
+/// # Errors
+/// [`BittError::Invalid`] naming `--intrinsics`, the value and the allowed range.
+pub fn check_intrinsics_for_image(
+    [fx, fy, cx, cy]: [f64; 4],
+    [w, h]: [usize; 2],
+) -> Result<(), BittError> {
+    let (w, h) = (w as f64, h as f64);
+    let long = w.max(h);
+    let [lo, hi] = FOCAL_RANGE_OF_LONG_SIDE;
+    let bad = |why: String| {
+        Err(BittError::Invalid(format!(
+            "--intrinsics {fx},{fy},{cx},{cy}: {why} for the {w}x{h} photo"
+        )))
+    };
+    for (name, f) in [("fx", fx), ("fy", fy)] {
+        if !(lo * long..=hi * long).contains(&f) {
+            return bad(format!(
+                "{name} = {f} px is not between {} and {} px ({lo} to {hi} times the long side)",
+                lo * long,
+                hi * long
+            ));
+        }
+    }
+    if !(-w..=2.0 * w).contains(&cx) || !(-h..=2.0 * h).contains(&cy) {
+        return bad(format!(
+            "the principal point ({cx}, {cy}) is not within ({}, {}) to ({}, {})",
+            -w,
+            -h,
+            2.0 * w,
+            2.0 * h
+        ));
+    }
+    Ok(())
+}
+
 /// Where a photo's keypoints come from.
 #[derive(Debug)]
 pub enum PhotoKeypoints<'a> {
@@ -229,7 +273,10 @@ pub fn fit_photo(
     }
     let (camera, camera_source) = match intrinsics {
         Some([fx, fy, cx, cy]) => (
-            PinholeCamera::from_intrinsics([fx, fy], [cx, cy], w as u32, h as u32)?,
+            {
+                check_intrinsics_for_image([fx, fy, cx, cy], [w, h])?;
+                PinholeCamera::from_intrinsics([fx, fy], [cx, cy], w as u32, h as u32)?
+            },
             format!("--intrinsics {fx},{fy},{cx},{cy}"),
         ),
         None => {

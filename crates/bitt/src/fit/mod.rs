@@ -1312,5 +1312,19 @@ mod tests {
             let e = parse_intrinsics(bad).unwrap_err().to_string();
             assert!(e.contains("--intrinsics"), "{e}");
         }
+        // Against the photo (issue 38, class 2): absurd focals and principal points.
+        jobs::check_intrinsics_for_image([600.0, 600.0, 320.0, 240.0], [640, 480]).unwrap();
+        jobs::check_intrinsics_for_image([600.0, 600.0, -100.0, 900.0], [640, 480]).unwrap();
+        for (bad, what) in [
+            ([1e-30, 600.0, 320.0, 240.0], "fx = "),
+            ([600.0, 1e9, 320.0, 240.0], "fy = "),
+            ([600.0, 600.0, 1e9, 240.0], "principal point"),
+            ([600.0, 600.0, 320.0, -1e6], "principal point"),
+        ] {
+            let e = jobs::check_intrinsics_for_image(bad, [640, 480])
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("--intrinsics") && e.contains(what), "{e}");
+        }
     }
 }
