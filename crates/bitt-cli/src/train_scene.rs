@@ -158,6 +158,12 @@ fn request(args: &TrainSceneArgs) -> Result<FreshRequest<'_>> {
         config: args.keypoint.fit_config.clone(),
     };
     let photo_only = args.image.is_some() && args.annotation.is_none() && args.keypoints.is_none();
+    if args.keypoint.fit_config.is_some() && args.keypoints.is_none() && !photo_only {
+        bail!(
+            "--fit-config configures the keypoint fit: of --keypoints, or of a photo given alone \
+             (--image without --annotation); it does not apply here"
+        );
+    }
     if args.refine_config.is_some() && !args.refine_mesh && !photo_only {
         bail!(
             "--refine-config configures --refine-mesh, or the refinement of a photo given alone \
@@ -876,6 +882,25 @@ mod tests {
             .unwrap_err()
         );
         assert!(e.contains("--refine-config"), "{e}");
+        // --fit-config with an annotation: no keypoint fit runs, so it is refused (issue 38).
+        let e = format!(
+            "{:#}",
+            run(&args(&[
+                "--image",
+                s(&img),
+                "--annotation",
+                s(&pkl),
+                "--fit-config",
+                "f.json",
+                "--out",
+                s(&out)
+            ]))
+            .unwrap_err()
+        );
+        assert!(
+            e.contains("--fit-config") && e.contains("does not apply"),
+            "{e}"
+        );
         // Malformed keypoints are named and leave no run folder.
         let bad_kp = dir.join("bad_keypoints.json");
         std::fs::write(&bad_kp, r#"{"right": [[1, 2, 1]]}"#).unwrap();
