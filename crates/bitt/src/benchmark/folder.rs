@@ -111,21 +111,81 @@ pub struct EvalPlan<'a> {
     pub dataset: &'a str,
 }
 
-/// Creates `out/scenes/` and writes the plan to `out/config.json`.
+/// The keys of an evaluation folder's `config.json`.
+const PLAN_KEYS: [&str; 6] = [
+    "train", "baseline", "methods", "settings", "scenes", "dataset",
+];
+
+/// Creates `out/scenes/` and writes the plan to `out/config.json`. An existing folder must be
+/// an evaluation of the same plan (a rerun resumes it, skipping finished scenes): a folder
+/// that is not an evaluation is refused untouched, and so is one whose `config.json` holds
+/// other settings, whose results would otherwise be kept as if they were this plan's.
+///
+/// # Errors
+/// A folder of the user's, an evaluation of another plan (naming what differs), or a write
+/// failure.
 pub fn prepare_folder(out: &Path, plan: &EvalPlan<'_>) -> Result<(), BittError> {
+    let config = serde_json::json!({
+        "train": plan.train,
+        "baseline": plan.baseline,
+        "methods": plan.methods.iter().map(|m| m.key()).collect::<Vec<_>>(),
+        "settings": plan.settings.iter().map(|s| s.key()).collect::<Vec<_>>(),
+        "scenes": plan.scenes,
+        "dataset": plan.dataset,
+    });
+    check_eval_folder(out, &config)?;
     let scenes = out.join("scenes");
     std::fs::create_dir_all(&scenes).map_err(|e| BittError::io(&scenes, e))?;
-    write_json(
-        &out.join("config.json"),
-        &serde_json::json!({
-            "train": plan.train,
-            "baseline": plan.baseline,
-            "methods": plan.methods.iter().map(|m| m.key()).collect::<Vec<_>>(),
-            "settings": plan.settings.iter().map(|s| s.key()).collect::<Vec<_>>(),
-            "scenes": plan.scenes,
-            "dataset": plan.dataset,
-        }),
-    )
+    write_json(&out.join("config.json"), &config)
+}
+
+/// Refuses `out` unless it is missing, empty, or an evaluation whose `config.json` is
+/// `config` (see [`prepare_folder`]).
+fn check_eval_folder(out: &Path, config: &serde_json::Value) -> Result<(), BittError> {
+    if out.exists() && !out.is_dir() {
+        return Err(BittError::Invalid(format!(
+            "{}: exists and is not a folder",
+            out.display()
+        )));
+    }
+    let empty = !out.exists()
+        || std::fs::read_dir(out)
+            .map_err(|e| BittError::io(out, e))?
+            .next()
+            .is_none();
+    if empty {
+        return Ok(());
+    }
+    let path = out.join("config.json");
+    let existing: Option<serde_json::Value> = std::fs::read_to_string(&path)
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok())
+        .filter(|v: &serde_json::Value| {
+            v.as_object()
+                .is_some_and(|o| PLAN_KEYS.iter().all(|k| o.contains_key(*k)))
+        });
+    let Some(existing) = existing else {
+        return Err(BittError::Invalid(format!(
+            "{}: the folder is not an evaluation (no config.json of one); nothing was written: \
+             choose another --out",
+            out.display()
+        )));
+    };
+    let differ: Vec<&str> = PLAN_KEYS
+        .iter()
+        .copied()
+        .filter(|k| existing[*k] != config[*k])
+        .collect();
+    if !differ.is_empty() {
+        return Err(BittError::Invalid(format!(
+            "{}: holds an evaluation with other settings ({} differ from this run's); its \
+             finished scenes would be kept as this run's. Rerun with its settings to resume it, \
+             or choose another --out",
+            out.display(),
+            differ.join(", ")
+        )));
+    }
+    Ok(())
 }
 
 /// Writes one evaluated scene: its contact sheet ([`write_sheet`]), then its result file
@@ -268,6 +328,43 @@ fn read_results(scenes: &Path) -> Result<Vec<SceneResult>, BittError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 38, classes 7 and 8: an evaluation folder is resumed only with its own plan; a
+    /// user's folder and an evaluation of other settings are refused untouched.
+    #[test]
+    fn eval_folders_resume_only_their_own_plan() {
+        let dir = std::env::temp_dir().join(format!("bitt-eval-plan-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let plan = |iterations: u64| {
+            serde_json::json!({
+                "train": {"iterations": iterations}, "baseline": {}, "methods": ["bitt"],
+                "settings": ["true"], "scenes": 2, "dataset": "synthetic",
+            })
+        };
+        // Missing or empty: fine.
+        check_eval_folder(&dir.join("new"), &plan(10)).unwrap();
+        std::fs::create_dir_all(dir.join("empty")).unwrap();
+        check_eval_folder(&dir.join("empty"), &plan(10)).unwrap();
+        // Its own plan: resumed.
+        let ours = dir.join("ours");
+        std::fs::create_dir_all(ours.join("scenes")).unwrap();
+        std::fs::write(ours.join("config.json"), plan(10).to_string()).unwrap();
+        check_eval_folder(&ours, &plan(10)).unwrap();
+        // Another plan: refused, naming what differs.
+        let e = check_eval_folder(&ours, &plan(20)).unwrap_err().to_string();
+        assert!(e.contains("other settings") && e.contains("train"), "{e}");
+        // A user's folder, even with a config.json of its own: refused, untouched.
+        let mine = dir.join("mine");
+        std::fs::create_dir_all(&mine).unwrap();
+        std::fs::write(mine.join("results.json"), "mine").unwrap();
+        std::fs::write(mine.join("config.json"), "{\"theme\": \"dark\"}").unwrap();
+        let e = check_eval_folder(&mine, &plan(10)).unwrap_err().to_string();
+        assert!(e.contains("not an evaluation"), "{e}");
+        assert_eq!(std::fs::read(mine.join("results.json")).unwrap(), b"mine");
+        std::fs::write(dir.join("file"), "x").unwrap();
+        assert!(check_eval_folder(&dir.join("file"), &plan(10)).is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     fn scratch(name: &str) -> PathBuf {
         let dir = std::env::temp_dir().join(format!("bitt-folder-{name}-{}", std::process::id()));

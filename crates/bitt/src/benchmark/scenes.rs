@@ -195,6 +195,10 @@ pub struct InterHandScenes<'a> {
     pub scenes: Option<usize>,
 }
 
+/// Why InterHand2.6M is evaluated with its annotated meshes only.
+const INTERHAND_MESHES_ONLY: &str = "--dataset interhand evaluates with the annotated meshes \
+     only (Table 1a); the setting without them needs a mesh estimator such as IntagHand";
+
 /// Evaluates one InterHand2.6M scene per capture (selected as `train-scene --interhand`
 /// does; annotated meshes only, Table 1a), this shard's, skipping those with a result.
 ///
@@ -207,11 +211,7 @@ pub fn evaluate_interhand(
     device: &Device,
     observer: &mut dyn EvalObserver,
 ) -> Result<(), BittError> {
-    require_given_meshes(
-        run,
-        "--dataset interhand evaluates with the annotated meshes only (Table 1a); the setting \
-         without them needs a mesh estimator such as IntagHand",
-    )?;
+    require_given_meshes(run, INTERHAND_MESHES_ONLY)?;
     let (root, split) = (data.root, data.split);
     let models = load_models(&data.hands, &data.prior)?;
     observer.say(&format!(
@@ -441,8 +441,11 @@ pub fn run_evaluation(
         scenes: e.scenes,
         dataset: &dataset,
     };
-    if let EvalSource::Photos { photos, .. } = e.source {
-        require_photo_files(photos)?;
+    // What can be refused from the options alone is, before the folder is touched.
+    match e.source {
+        EvalSource::Photos { photos, .. } => require_photo_files(photos)?,
+        EvalSource::InterHand { .. } => require_given_meshes(&e.run, INTERHAND_MESHES_ONLY)?,
+        EvalSource::Synthetic => {}
     }
     prepare_folder(e.run.out, &plan)?;
     let lpips = LpipsVgg::load_or_find(e.lpips, &device.clone().inner())?;
