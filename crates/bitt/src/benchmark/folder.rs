@@ -134,9 +134,11 @@ pub fn prepare_folder(out: &Path, plan: &EvalPlan<'_>) -> Result<(), BittError> 
         "dataset": plan.dataset,
     });
     check_eval_folder(out, &config)?;
+    // config.json first: shards starting together into one folder see it missing (with at
+    // most another shard's temporary of it) or whole, never a folder without it.
+    write_json(&out.join("config.json"), &config)?;
     let scenes = out.join("scenes");
-    std::fs::create_dir_all(&scenes).map_err(|e| BittError::io(&scenes, e))?;
-    write_json(&out.join("config.json"), &config)
+    std::fs::create_dir_all(&scenes).map_err(|e| BittError::io(&scenes, e))
 }
 
 /// Refuses `out` unless it is missing, empty, or an evaluation whose `config.json` is
@@ -148,11 +150,16 @@ fn check_eval_folder(out: &Path, config: &serde_json::Value) -> Result<(), BittE
             out.display()
         )));
     }
+    // Empty, or holding only another shard's config.json on its way in.
     let empty = !out.exists()
         || std::fs::read_dir(out)
             .map_err(|e| BittError::io(out, e))?
-            .next()
-            .is_none();
+            .flatten()
+            .all(|e| {
+                e.file_name()
+                    .to_string_lossy()
+                    .starts_with(".config.json.tmp")
+            });
     if empty {
         return Ok(());
     }
@@ -341,9 +348,11 @@ mod tests {
                 "settings": ["true"], "scenes": 2, "dataset": "synthetic",
             })
         };
-        // Missing or empty: fine.
+        // Missing, empty, or another shard's config.json on its way in: fine.
         check_eval_folder(&dir.join("new"), &plan(10)).unwrap();
         std::fs::create_dir_all(dir.join("empty")).unwrap();
+        check_eval_folder(&dir.join("empty"), &plan(10)).unwrap();
+        std::fs::write(dir.join("empty/.config.json.tmp123"), "{").unwrap();
         check_eval_folder(&dir.join("empty"), &plan(10)).unwrap();
         // Its own plan: resumed.
         let ours = dir.join("ours");
