@@ -424,7 +424,8 @@ fn restore_numbers(value: Value) -> Value {
                 .parse::<f64>()
                 .ok()
                 .and_then(serde_json::Number::from_f64)
-                .map_or_else(|| Value::String(text.to_owned()), Value::Number),
+                // Too large for f64: stays marked, so messages call it a number.
+                .map_or_else(|| Value::String(s.clone()), Value::Number),
             None => Value::String(s),
         },
         Value::Array(a) => Value::Array(a.into_iter().map(restore_numbers).collect()),
@@ -527,6 +528,10 @@ fn number(v: &Value, field: impl FnOnce() -> String) -> Result<f64, String> {
 fn describe(v: &Value) -> String {
     match v {
         Value::Number(n) => format!("{n}"),
+        Value::String(s) if s.starts_with(NUMBER_MARK) => format!(
+            "the number {}, too large for a 64-bit float",
+            &s[NUMBER_MARK.len()..]
+        ),
         Value::String(s) if s.chars().count() <= 40 => format!("the string {s:?}"),
         other => kind(other).to_owned(),
     }
@@ -1742,6 +1747,13 @@ mod tests {
         let message = e.unwrap_err().to_string();
         assert!(
             message.contains("left[0][0]") || message.contains("not JSON"),
+            "{message}"
+        );
+        // ... and is named as a number, not as a string (issue 38, class 10).
+        assert!(
+            message.contains("left[0][0]")
+                && message.contains("the number 1e400, too large")
+                && !message.contains("string"),
             "{message}"
         );
     }
