@@ -54,6 +54,21 @@ impl Case {
 
     /// Runs `bitt args` in the case's folder and checks: exit code `code`, stderr holding
     /// every one of `expect`, and the folder unchanged.
+    /// Runs `bitt` with `args` in the case's folder; it must succeed. Returns its stdout.
+    fn succeeds(&self, args: &[&str]) -> String {
+        let out = Command::new(env!("CARGO_BIN_EXE_bitt"))
+            .args(args)
+            .current_dir(&self.dir)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    }
+
     fn fails(&self, args: &[&str], code: i32, expect: &[&str]) -> String {
         let before = snapshot(&self.dir);
         let out = Command::new(env!("CARGO_BIN_EXE_bitt"))
@@ -121,16 +136,7 @@ fn trained_run(case: &Case) -> String {
         case,
         &["--iterations", "5", "--turntable", "0", "--out", &run],
     );
-    let out = Command::new(env!("CARGO_BIN_EXE_bitt"))
-        .args(strs(&args))
-        .current_dir(&case.dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    case.succeeds(&strs(&args));
     run
 }
 
@@ -475,17 +481,7 @@ fn xr_exports_refuse_bad_runs_and_outputs() {
     std::fs::write(&textures, saved).unwrap();
     // A good export, then another convention over it.
     for convention in ["webxr", "openxr"] {
-        let out = Command::new(env!("CARGO_BIN_EXE_bitt"))
-            .args(strs(&export(&run, convention, &xr)))
-            .current_dir(&case.dir)
-            .output()
-            .unwrap();
-        let stdout = String::from_utf8_lossy(&out.stdout);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        let stdout = case.succeeds(&strs(&export(&run, convention, &xr)));
         assert!(stdout.contains("mean vertex error"), "{stdout}");
         let mut names: Vec<String> = std::fs::read_dir(&xr)
             .unwrap()
@@ -562,16 +558,7 @@ fn exports_and_renders_never_replace_users_files() {
     // Their own earlier outputs are replaced; an OBJ named with a space gets companions
     // named without one.
     let ok = |args: &[&str]| {
-        let out = Command::new(env!("CARGO_BIN_EXE_bitt"))
-            .args(args)
-            .current_dir(&case.dir)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{args:?}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        case.succeeds(args);
     };
     for _ in 0..2 {
         ok(&["export", "--run", &run, "--out", &case.s("a.glb")]);

@@ -45,6 +45,21 @@ fn write_synthetic_run(
     )
 }
 
+/// The tiny scene trained for one iteration and its run folder written into `scratch(name)`:
+/// the trainer, the scene and the folder (what the avatar-file tests start from).
+fn written_one_iteration_run(
+    name: &str,
+) -> (crate::trainer::Trainer, SynthScene, std::path::PathBuf) {
+    let (mut config, scene, pca) = tiny();
+    config.iterations = 1;
+    let device = Device::flex().autodiff();
+    let mut t = synthetic_trainer(&scene, &config, &pca, &device).unwrap();
+    t.train(None, &mut Silent).unwrap();
+    let dir = scratch(name);
+    write_synthetic_run(&dir, &t, &scene, 0).unwrap();
+    (t, scene, dir)
+}
+
 fn scratch(name: &str) -> std::path::PathBuf {
     let d = std::env::temp_dir().join(format!("bitt-tests-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
@@ -460,13 +475,7 @@ fn gltf_validator_report(file: &std::path::Path) -> Option<serde_json::Value> {
 fn a_trained_runs_xr_hands_are_valid_and_follow_tracked_poses() {
     use bitt_mesh::export::{WEBXR_JOINTS, gltf_vertex_sources, skinned_vertices_posed};
     use bitt_mesh::glam::{DMat4, DQuat};
-    let (mut config, scene, pca) = tiny();
-    config.iterations = 1;
-    let device = Device::flex().autodiff();
-    let mut t = synthetic_trainer(&scene, &config, &pca, &device).unwrap();
-    t.train(None, &mut Silent).unwrap();
-    let dir = scratch("xr");
-    write_synthetic_run(&dir, &t, &scene, 0).unwrap();
+    let (t, scene, dir) = written_one_iteration_run("xr");
     let xr = dir.join("xr");
     let playback: serde_json::Value =
         serde_json::from_slice(&std::fs::read(xr.join("playback.json")).unwrap()).unwrap();
@@ -565,13 +574,7 @@ fn a_trained_runs_xr_hands_are_valid_and_follow_tracked_poses() {
 fn a_trained_runs_avatar_is_rigged_and_valid_gltf() {
     use bitt_mesh::export::{gltf_vertex_sources, skinned_vertices};
     use bitt_mesh::glam::{DMat3, DVec3};
-    let (mut config, scene, pca) = tiny();
-    config.iterations = 1;
-    let device = Device::flex().autodiff();
-    let mut t = synthetic_trainer(&scene, &config, &pca, &device).unwrap();
-    t.train(None, &mut Silent).unwrap();
-    let dir = scratch("avatar");
-    write_synthetic_run(&dir, &t, &scene, 0).unwrap();
+    let (t, scene, dir) = written_one_iteration_run("avatar");
     let glb = std::fs::read(dir.join("avatar.glb")).unwrap();
     assert!(dir.join("avatar_static.glb").is_file());
 
