@@ -8,6 +8,11 @@ use glam::{DMat3, DVec2, DVec3};
 
 use crate::MeshError;
 
+/// The depths (metres along the camera's axis) every vertex of a photographed hand lies
+/// between: nearer than 5 cm, or farther than 20 m, is a wrong translation (or keypoints in
+/// the wrong units), not a photo.
+pub const HAND_DEPTH_RANGE_M: [f64; 2] = [0.05, 20.0];
+
 /// A pinhole camera: `x_cam = R x_world + t`, `pixel = K x_cam / z_cam`.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PinholeCamera {

@@ -94,6 +94,24 @@ pub struct Keypoint {
     pub confidence: f64,
 }
 
+/// The least diagonal (pixels) of the bounding box of a hand's present points: below it the
+/// points are one spot, not a hand (normalised coordinates read as pixels span about 1 px).
+pub const MIN_HAND_SPAN_PX: f64 = 8.0;
+
+/// The least thickness of a hand's points (the standard deviation across their main
+/// direction over the one along it): real hands measure 0.75 to 0.82 on the demo frames'
+/// detections, points on a line 0.
+pub const MIN_HAND_THICKNESS: f64 = 0.05;
+
+/// The highest confidence a hand's points must reach: below it the detector found nothing
+/// there.
+pub const MIN_HAND_CONFIDENCE: f64 = 1e-3;
+
+/// The least mean distance between the two hands' corresponding points, as a fraction of the
+/// larger hand's span: interlocked hands in the demo frames are 0.12 and 0.36 apart, a hand's
+/// points copied into the other hand 0.
+pub const MIN_HANDS_APART: f64 = 0.03;
+
 /// The keypoint file formats this module reads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -172,6 +190,91 @@ impl TwoHandKeypoints {
     pub fn num_present(&self, side: Side) -> usize {
         self.hand(side)
             .map_or(0, |h| h.iter().filter(|p| p.confidence > 0.0).count())
+    }
+
+    /// The diagonal (pixels) of the bounding box of one hand's present points (`None` for a
+    /// missing hand).
+    pub fn span_px(&self, side: Side) -> Option<f64> {
+        let present = present_points(self.hand(side)?);
+        if present.is_empty() {
+            return None;
+        }
+        let (lo, hi) = present.iter().fold(
+            ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]),
+            |(lo, hi), p| {
+                (
+                    [lo[0].min(p.x), lo[1].min(p.y)],
+                    [hi[0].max(p.x), hi[1].max(p.y)],
+                )
+            },
+        );
+        Some((hi[0] - lo[0]).hypot(hi[1] - lo[1]))
+    }
+
+    /// Checks that each hand's points can be a photographed hand, before anything is fitted
+    /// to them: they span at least [`MIN_HAND_SPAN_PX`], do not lie on a line (thickness at
+    /// least [`MIN_HAND_THICKNESS`]), at least one is confident ([`MIN_HAND_CONFIDENCE`]), and
+    /// the two hands are not the same points ([`MIN_HANDS_APART`]).
+    ///
+    /// # Errors
+    /// What is wrong, naming the hand, the measured value and the likely cause.
+    pub fn check_plausible(&self) -> Result<(), String> {
+        for side in Side::BOTH {
+            let Some(points) = self.hand(side) else {
+                continue;
+            };
+            let present = present_points(points);
+            if present.is_empty() {
+                continue;
+            }
+            let highest = present.iter().map(|p| p.confidence).fold(0.0, f64::max);
+            if highest < MIN_HAND_CONFIDENCE {
+                return Err(format!(
+                    "the {side} hand's points are all but missing: its highest confidence is \
+                     {highest:e} (below {MIN_HAND_CONFIDENCE}); the detector did not find this \
+                     hand, so leave it out of the file"
+                ));
+            }
+            let span = self.span_px(side).unwrap_or(0.0);
+            if span < MIN_HAND_SPAN_PX {
+                return Err(format!(
+                    "the {side} hand's {} points span {span:.2} px (a hand spans at least \
+                     {MIN_HAND_SPAN_PX} px): not a hand; coordinates normalised to 0..1 given \
+                     in a pixel format?",
+                    present.len()
+                ));
+            }
+            let thickness = thickness(&present);
+            if thickness < MIN_HAND_THICKNESS {
+                return Err(format!(
+                    "the {side} hand's points lie on a line (thickness {thickness:.3} of their \
+                     length, a hand's is above {MIN_HAND_THICKNESS}): not a hand"
+                ));
+            }
+        }
+        if let (Some(l), Some(r)) = (&self.left, &self.right) {
+            let pairs: Vec<f64> = l
+                .iter()
+                .zip(r)
+                .filter(|(a, b)| a.confidence > 0.0 && b.confidence > 0.0)
+                .map(|(a, b)| (a.x - b.x).hypot(a.y - b.y))
+                .collect();
+            let span = Side::BOTH
+                .iter()
+                .filter_map(|&s| self.span_px(s))
+                .fold(0.0, f64::max);
+            if pairs.len() >= NUM_KEYPOINTS / 2 {
+                let apart = pairs.iter().sum::<f64>() / pairs.len() as f64;
+                if apart < MIN_HANDS_APART * span {
+                    return Err(format!(
+                        "the left and right hands are given the same points (their points are \
+                         {apart:.2} px apart on average, the hands span {span:.0} px): one \
+                         hand's points were copied into the other's"
+                    ));
+                }
+            }
+        }
+        Ok(())
     }
 
     /// The plain format's JSON text: exactly what [`parse_keypoints`] reads back as
@@ -493,6 +596,39 @@ fn check_point(
         bounds.check(p.y, 1, || field(1))?;
     }
     Ok(())
+}
+
+/// The present points (confidence > 0) of one hand.
+fn present_points(points: &[Keypoint]) -> Vec<Keypoint> {
+    points
+        .iter()
+        .filter(|p| p.confidence > 0.0)
+        .copied()
+        .collect()
+}
+
+/// The square root of the ratio of the smaller to the larger eigenvalue of the points'
+/// covariance: 0 on a line, 1 for a round cloud.
+fn thickness(points: &[Keypoint]) -> f64 {
+    let n = points.len() as f64;
+    let (mx, my) = (
+        points.iter().map(|p| p.x).sum::<f64>() / n,
+        points.iter().map(|p| p.y).sum::<f64>() / n,
+    );
+    let (mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0);
+    for p in points {
+        let (dx, dy) = (p.x - mx, p.y - my);
+        sxx += dx * dx;
+        syy += dy * dy;
+        sxy += dx * dy;
+    }
+    let (mean, diff) = ((sxx + syy) / 2.0, (sxx - syy) / 2.0);
+    let radius = diff.hypot(sxy);
+    let (large, small) = (mean + radius, (mean - radius).max(0.0));
+    if large <= 0.0 {
+        return 0.0;
+    }
+    (small / large).sqrt()
 }
 
 /// `Some(points)` unless every point is missing.
@@ -862,6 +998,91 @@ mod tests {
             format,
             image_size: [W, H],
             mirrored: false,
+        }
+    }
+
+    #[test]
+    fn plausibility_measures_span_thickness_confidence_and_separation() {
+        let hands = |left: Vec<Keypoint>, right: Vec<Keypoint>| TwoHandKeypoints {
+            left: Some(left),
+            right: Some(right),
+            format: KeypointFormat::Plain,
+            notes: Vec::new(),
+        };
+        let ok = hands(truth(Side::Left), truth(Side::Right));
+        ok.check_plausible().unwrap();
+        // A 3:4 box's corners: span 5, thickness 3/4 (standard deviations 1.5 and 2).
+        let corners: Vec<Keypoint> = [(0.0, 0.0), (3.0, 0.0), (0.0, 4.0), (3.0, 4.0)]
+            .iter()
+            .map(|&(x, y)| Keypoint {
+                x,
+                y,
+                confidence: 1.0,
+            })
+            .collect();
+        assert!((thickness(&corners) - 0.75).abs() < 1e-12);
+        let mut with_missing = truth(Side::Left);
+        with_missing[3] = Keypoint {
+            x: 1e6,
+            y: -1e6,
+            confidence: 0.0,
+        };
+        let full = hands(truth(Side::Left), truth(Side::Right)).span_px(Side::Left);
+        assert_eq!(
+            hands(with_missing, truth(Side::Right)).span_px(Side::Left),
+            full
+        );
+        let cases: [(TwoHandKeypoints, &str); 4] = [
+            (
+                hands(
+                    truth(Side::Left)
+                        .iter()
+                        .map(|p| Keypoint {
+                            x: p.x / 640.0,
+                            y: p.y / 480.0,
+                            ..*p
+                        })
+                        .collect(),
+                    truth(Side::Right),
+                ),
+                "the left hand's 21 points span 0.",
+            ),
+            (
+                hands(
+                    truth(Side::Left),
+                    truth(Side::Right)
+                        .iter()
+                        .enumerate()
+                        .map(|(i, p)| Keypoint {
+                            x: i as f64 * 10.0,
+                            y: 5.0,
+                            ..*p
+                        })
+                        .collect(),
+                ),
+                "the right hand's points lie on a line (thickness 0.000",
+            ),
+            (
+                hands(
+                    truth(Side::Left)
+                        .iter()
+                        .map(|p| Keypoint {
+                            confidence: 1e-4,
+                            ..*p
+                        })
+                        .collect(),
+                    truth(Side::Right),
+                ),
+                "highest confidence is 1e-4",
+            ),
+            (
+                hands(truth(Side::Right), truth(Side::Right)),
+                "given the same points",
+            ),
+        ];
+        for (kp, expected) in cases {
+            let e = kp.check_plausible().unwrap_err();
+            assert!(e.contains(expected), "{e}");
         }
     }
 

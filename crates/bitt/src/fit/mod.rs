@@ -28,6 +28,7 @@ mod jobs;
 
 use std::time::Instant;
 
+use bitt_mesh::camera::HAND_DEPTH_RANGE_M;
 use bitt_mesh::glam::{DMat3, DVec2, DVec3};
 use bitt_mesh::keypoints::{Keypoint, NUM_KEYPOINTS, TwoHandKeypoints};
 use bitt_mesh::model::{NUM_BETAS, NUM_POSE};
@@ -862,6 +863,13 @@ pub fn fit_keypoints(
             "no hand has at least {MIN_KEYPOINTS} keypoints to fit"
         )));
     }
+    let kept = TwoHandKeypoints {
+        left: points[0].clone(),
+        right: points[1].clone(),
+        format: keypoints.format,
+        notes: Vec::new(),
+    };
+    kept.check_plausible().map_err(BittError::Invalid)?;
     let cam = camera_frame(camera);
     let scale = f64::from(camera.width.max(camera.height)) / 256.0;
     let mean_pose: Vec<f32> = Side::BOTH
@@ -990,6 +998,7 @@ pub fn fit_keypoints(
         let per_joint = flexion_angles(&aa, &axes[45 * h..45 * h + 45]);
         let flex: Vec<f64> = per_joint.iter().flatten().copied().collect();
         let wrist = models.get(side).forward(p)?.joints[0];
+        check_fitted_hand(side, wrist.z, mean_present(r), kept.span_px(side))?;
         hands_report.push(HandFitReport {
             side,
             keypoints: present.len(),
@@ -1030,6 +1039,43 @@ pub fn fit_keypoints(
             config: config.clone(),
         },
     })
+}
+
+/// The largest mean keypoint residual of a fitted hand, as a fraction of the span of its
+/// keypoints: the detections of the demo frames and of 12 resized, mirrored, rotated and
+/// shifted copies fit to 0.004 to 0.015 of their span; 21 random points in the photo miss by
+/// 0.16, a detection's points in shuffled order by 0.14.
+pub const MAX_RESIDUAL_OF_SPAN: f64 = 0.08;
+
+/// Refuses a fitted hand that cannot be the photographed one: its wrist outside
+/// [`HAND_DEPTH_RANGE_M`], or its mean residual above [`MAX_RESIDUAL_OF_SPAN`] of the
+/// keypoints' span.
+fn check_fitted_hand(
+    side: Side,
+    wrist_depth_m: f64,
+    residual_px: f64,
+    span_px: Option<f64>,
+) -> Result<(), BittError> {
+    let [near, far] = HAND_DEPTH_RANGE_M;
+    if !(near..=far).contains(&wrist_depth_m) {
+        return Err(BittError::Invalid(format!(
+            "the {side} hand's keypoints fit a hand {wrist_depth_m:.3} m from the camera (a \
+             photographed hand lies {near} to {far} m away): are the keypoints in the photo's \
+             pixels (see --format) and the intrinsics the photo's?"
+        )));
+    }
+    if let Some(span) = span_px {
+        if residual_px > MAX_RESIDUAL_OF_SPAN * span {
+            return Err(BittError::Invalid(format!(
+                "the {side} hand's keypoints fit no hand: the fitted hand misses them by \
+                 {residual_px:.1} px on average, {:.0}% of the {span:.0} px they span (at most \
+                 {:.0}%); check that they are a hand's 21 points in OpenPose order",
+                100.0 * residual_px / span,
+                100.0 * MAX_RESIDUAL_OF_SPAN
+            )));
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -1162,6 +1208,121 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.contains("no hand"), "{e}");
+    }
+
+    /// Issue 38, class 1: points that are not a photographed hand are refused with the reason,
+    /// not fitted (before, each of these "succeeded").
+    #[test]
+    fn keypoints_that_are_not_a_hand_are_refused() {
+        let (truth, keypoints) = scene();
+        let models = bitt_mesh::procedural_pair();
+        let device = Device::flex().autodiff();
+        let config = FitConfig {
+            check_handedness: false,
+            ..FitConfig::default()
+        };
+        let fit = |kp: &TwoHandKeypoints, camera: &PinholeCamera| {
+            fit_keypoints(&models, kp, camera, &config, &device, &mut Quiet)
+                .map(|_| ())
+                .unwrap_err()
+                .to_string()
+        };
+        let map = |f: &dyn Fn(usize, &Keypoint) -> Keypoint| TwoHandKeypoints {
+            left: keypoints
+                .left
+                .as_ref()
+                .map(|h| h.iter().enumerate().map(|(i, p)| f(i, p)).collect()),
+            right: keypoints
+                .right
+                .as_ref()
+                .map(|h| h.iter().enumerate().map(|(i, p)| f(i, p)).collect()),
+            ..keypoints.clone()
+        };
+        // Normalised coordinates read as pixels.
+        let e = fit(
+            &map(&|_, p| Keypoint {
+                x: p.x / 256.0,
+                y: p.y / 256.0,
+                ..*p
+            }),
+            &truth.camera,
+        );
+        assert!(e.contains("span 0.") && e.contains("normalised"), "{e}");
+        // Every point on one pixel.
+        let e = fit(
+            &map(&|_, p| Keypoint {
+                x: 100.0,
+                y: 90.0,
+                ..*p
+            }),
+            &truth.camera,
+        );
+        assert!(e.contains("span 0.00 px"), "{e}");
+        // Points on a line.
+        let e = fit(
+            &map(&|i, p| Keypoint {
+                x: 40.0 + 5.0 * i as f64,
+                y: 50.0 + 3.0 * i as f64,
+                ..*p
+            }),
+            &truth.camera,
+        );
+        assert!(e.contains("lie on a line"), "{e}");
+        // Confidences of 1e-300.
+        let e = fit(
+            &map(&|_, p| Keypoint {
+                confidence: 1e-300,
+                ..*p
+            }),
+            &truth.camera,
+        );
+        assert!(e.contains("highest confidence is 1e-300"), "{e}");
+        // Both hands given the same points.
+        let same = TwoHandKeypoints {
+            left: keypoints.right.clone(),
+            ..keypoints.clone()
+        };
+        let e = fit(&same, &truth.camera);
+        assert!(e.contains("the same points"), "{e}");
+        // The points in another order (not a hand's skeleton).
+        let order = [
+            7, 19, 3, 12, 0, 16, 9, 4, 20, 1, 14, 6, 11, 18, 2, 8, 15, 5, 13, 10, 17,
+        ];
+        let shuffled = TwoHandKeypoints {
+            left: keypoints
+                .left
+                .as_ref()
+                .map(|h| order.iter().map(|&i| h[i]).collect()),
+            right: None,
+            ..keypoints.clone()
+        };
+        let e = fit(&shuffled, &truth.camera);
+        assert!(e.contains("left hand's keypoints fit no hand"), "{e}");
+        // A 12-pixel hand under a focal length of 100 times the image: 100s of metres away.
+        let far =
+            PinholeCamera::from_intrinsics([25_600.0, 25_600.0], [128.0, 120.0], 256, 256).unwrap();
+        let tiny = map(&|_, p| Keypoint {
+            x: 128.0 + (p.x - 128.0) * 0.1,
+            y: 120.0 + (p.y - 120.0) * 0.1,
+            ..*p
+        });
+        let e = fit(&tiny, &far);
+        assert!(
+            e.contains("m from the camera (a photographed hand lies 0.05 to 20 m"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn fitted_hands_are_checked_for_depth_and_residual() {
+        assert!(check_fitted_hand(Side::Left, 0.4, 2.0, Some(200.0)).is_ok());
+        let e = check_fitted_hand(Side::Right, 100.0, 0.01, Some(0.5)).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("right hand's keypoints fit a hand 100.000 m")
+        );
+        let e = check_fitted_hand(Side::Left, 0.4, 30.0, Some(200.0)).unwrap_err();
+        assert!(e.to_string().contains("15% of the 200 px"), "{e}");
     }
 
     /// The keypoints of [`scene`] written as OpenPose, MediaPipe (Python and JS field names)

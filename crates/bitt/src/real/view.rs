@@ -40,9 +40,7 @@ pub struct RealScene {
 /// annotation belongs to another image).
 pub const MIN_HAND_INSIDE: f64 = 0.5;
 
-/// The depths (metres along the camera's axis) every vertex of a photographed hand lies
-/// between: nearer than 5 cm, or farther than 20 m, is a wrong translation, not a photo.
-pub const HAND_DEPTH_RANGE_M: [f64; 2] = [0.05, 20.0];
+pub use bitt_mesh::camera::HAND_DEPTH_RANGE_M;
 
 /// Checks each hand of the training view on its own: its position finite, every vertex in
 /// front of the camera within [`HAND_DEPTH_RANGE_M`], and at least [`MIN_HAND_INSIDE`] of its
