@@ -269,6 +269,9 @@ mod tests {
             "{record}"
         );
         assert_eq!(record["report"]["hands"].as_array().unwrap().len(), 2);
+        // The keypoint residual after the refinement is reported beside the fit's.
+        let after = record["refined_residual_px"].as_array().unwrap();
+        assert!(after.iter().all(|r| r.as_f64().unwrap() >= 0.0), "{record}");
         let e = format!(
             "{:#}",
             run(&args(&[
@@ -338,6 +341,16 @@ mod tests {
         a.extend(["--mask".into(), s(&small)]);
         let e = format!("{:#}", run(&args(&a)).unwrap_err());
         assert!(e.contains("small.png") && e.contains("100x80"), "{e}");
+        // Issue 38, class 3: an all-white mask used to blow the hands up to fill the photo.
+        let white = dir.join("white.png");
+        write_image(&white, 256, 256, Some(&|_, _| [255, 255, 255]));
+        let mut a = common(&kp, &bad_out);
+        a.extend(["--mask".into(), s(&white)]);
+        let e = format!("{:#}", run(&args(&a)).unwrap_err());
+        assert!(
+            e.contains("white.png") && e.contains("100.0% of the photo"),
+            "{e}"
+        );
         let mut a = common(&kp, &bad_out);
         a.extend(["--intrinsics".into(), "600,600".into()]);
         let e = format!("{:#}", run(&args(&a)).unwrap_err());

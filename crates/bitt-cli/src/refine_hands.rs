@@ -205,6 +205,16 @@ mod tests {
         a.extend(["--mask".into(), s(&empty).into()]);
         let e = format!("{:#}", run(&with(a)).unwrap_err());
         assert!(e.contains("empty"), "{e}");
+        // Issue 38, class 3: an all-white mask used to blow the hands up to fill the photo.
+        let white = dir.join("white.png");
+        write_image(&white, 256, 256, Some(&|_, _| [255, 255, 255]));
+        let mut a = common(&pkl, &bad_out);
+        a.extend(["--mask".into(), s(&white).into()]);
+        let e = format!("{:#}", run(&with(a)).unwrap_err());
+        assert!(
+            e.contains("white.png") && e.contains("100.0% of the photo"),
+            "{e}"
+        );
         let e = format!("{:#}", run(&with(common(&nan, &bad_out))).unwrap_err());
         assert!(e.contains("nan.pkl") && e.contains("NaN"), "{e}");
         assert!(

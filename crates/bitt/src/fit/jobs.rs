@@ -129,6 +129,9 @@ pub struct PhotoFit {
     pub keypoints: TwoHandKeypoints,
     /// The silhouette refinement that followed, when one was asked for.
     pub refinement: Option<PhotoRefinement>,
+    /// Each hand's mean keypoint residual (pixels; left, right) after the refinement, when
+    /// there was one: the fit's report holds the residual before it.
+    pub refined_residual_px: Option<[Option<f64>; 2]>,
     /// The detection the keypoints came from (no keypoint file given).
     pub detection: Option<DetectionFiles>,
     /// The final hands (refined when asked), at the photo's camera.
@@ -154,8 +157,14 @@ impl PhotoFit {
         let mut lines: Vec<String> = report.notes.iter().map(|n| format!("note: {n}")).collect();
         lines.push(format!("camera: {}", self.camera_source));
         for h in &report.hands {
+            let refined = self
+                .refined_residual_px
+                .and_then(|r| r[h.side as usize])
+                .map_or(String::new(), |r| {
+                    format!("; {r:.2} px mean after the mask refinement")
+                });
             lines.push(format!(
-                "{} hand: {} keypoints, residual {:.2} px mean ({:.2} max), wrist at {:.3} m",
+                "{} hand: {} keypoints, residual {:.2} px mean ({:.2} max), wrist at {:.3} m{refined}",
                 h.side, h.keypoints, h.mean_residual_px, h.max_residual_px, h.wrist_depth_m
             ));
         }
@@ -192,6 +201,7 @@ impl PhotoFit {
             "camera": self.camera_source,
             "report": self.fit.report,
             "refinement": self.refinement.as_ref().map(PhotoRefinement::record),
+            "refined_residual_px": self.refined_residual_px,
         })
     }
 }
@@ -320,6 +330,25 @@ pub fn fit_photo(
     let final_hands = refinement
         .as_ref()
         .map_or_else(|| fit.hands.clone(), |r| r.refinement.hands.clone());
+    let refined_residual_px = match &refinement {
+        Some(_) => {
+            let after = keypoint_residuals(&models, &final_hands, &points)?;
+            for side in Side::BOTH {
+                let (Some(r), Some(span)) = (after[side as usize], points.span_px(side)) else {
+                    continue;
+                };
+                if r > crate::fit::MAX_RESIDUAL_OF_SPAN * span {
+                    notes.push(format!(
+                        "the mask refinement moved the {side} hand off its keypoints (it misses \
+                         them by {r:.1} px on average, {:.0}% of their span): check the mask",
+                        100.0 * r / span
+                    ));
+                }
+            }
+            Some(after)
+        }
+        None => None,
+    };
     let mut fit = fit;
     fit.report.notes.extend(notes);
     let assets = HandAssets::new(models.clone(), 64)?;
@@ -328,6 +357,7 @@ pub fn fit_photo(
         fit,
         keypoints: points,
         refinement,
+        refined_residual_px,
         detection,
         hands: final_hands,
         models,
@@ -336,6 +366,32 @@ pub fn fit_photo(
         camera_source,
         overlay,
     })
+}
+
+/// Each hand's mean distance (pixels; left, right) between its present `keypoints` and the
+/// projected joints of `hands` (`None` for a hand missing from either).
+///
+/// # Errors
+/// Hands that cannot be posed.
+pub fn keypoint_residuals(
+    models: &HandPair,
+    hands: &TwoHandScene,
+    keypoints: &TwoHandKeypoints,
+) -> Result<[Option<f64>; 2], BittError> {
+    let posed = hands.pose_in_camera(models)?;
+    Ok(Side::BOTH.map(|side| {
+        let (joints, points) = (&posed.get(side)?.joints, keypoints.hand(side)?);
+        let d: Vec<f64> = points
+            .iter()
+            .zip(joints)
+            .filter(|(k, _)| k.confidence > 0.0)
+            .filter_map(|(k, j)| {
+                let p = hands.camera.camera_to_pixel(*j)?;
+                Some((p.x - k.x).hypot(p.y - k.y))
+            })
+            .collect();
+        (!d.is_empty()).then(|| d.iter().sum::<f64>() / d.len() as f64)
+    }))
 }
 
 /// The overlay of [`PhotoFit::overlay`]: `image` `[3, H, W]` at `hands`' camera with

@@ -256,7 +256,8 @@ impl PhotoRefinement {
 /// and checks it against the photo's size.
 ///
 /// # Errors
-/// An unreadable file, or a size other than `[h, w]`.
+/// An unreadable file, a size other than `[h, w]`, or more than [`MAX_MASK_FRACTION`] of
+/// it marked as hand.
 pub fn read_mask(path: &Path, [h, w]: [usize; 2]) -> Result<Vec<f32>, BittError> {
     let img = bitt_texture::image_io::load_image(path)?;
     if [img.height, img.width] != [h, w] {
@@ -267,8 +268,24 @@ pub fn read_mask(path: &Path, [h, w]: [usize; 2]) -> Result<Vec<f32>, BittError>
             img.height
         )));
     }
-    Ok(threshold_mask(&img.data, h * w, 0.5))
+    let mask = threshold_mask(&img.data, h * w, 0.5);
+    let fraction = mask.iter().filter(|&&m| m > 0.5).count() as f64 / (h * w) as f64;
+    if fraction > MAX_MASK_FRACTION {
+        return Err(BittError::Invalid(format!(
+            "{}: the mask marks {:.1}% of the photo as hand (at most {:.0}%): a hand mask is \
+             white on the hands and black elsewhere; is it blank or inverted?",
+            path.display(),
+            100.0 * fraction,
+            100.0 * MAX_MASK_FRACTION
+        )));
+    }
+    Ok(mask)
 }
+
+/// The largest fraction of a photo that a given hand mask may mark as hand: both hands must
+/// be in view, so they cannot fill it (the demo frames' hands and forearms cover 37%). An
+/// all-white mask used to blow the hands up to fill the frame.
+pub const MAX_MASK_FRACTION: f64 = 0.9;
 
 /// Refines the hands of a BiTT annotation (pickle or `hands.json`) against its photo, at
 /// `size` x `size` (the photo is cropped around the hands as the reference does and resized;
@@ -354,7 +371,7 @@ pub fn refine_photo_hands(
     };
     if !full_mask.iter().any(|&m| m > 0.5) {
         return Err(BittError::Invalid(format!(
-            "{} ({mask_source}): the hand mask is empty (no pixel is hand), so there is              nothing to fit to",
+            "{} ({mask_source}): the hand mask is empty (no pixel is hand), so there is nothing to fit to",
             image.display()
         )));
     }
