@@ -570,7 +570,10 @@ mod tests {
             "{:#}",
             crate::export::run(&not_a_run.unwrap().args).unwrap_err()
         );
-        assert!(e.contains("not a complete train-scene run"), "{e}");
+        assert!(
+            e.contains("not a complete and intact train-scene run"),
+            "{e}"
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 

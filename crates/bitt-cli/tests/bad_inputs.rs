@@ -583,3 +583,62 @@ fn exports_and_renders_never_replace_users_files() {
         assert!(case.path(f).is_file(), "{f}");
     }
 }
+
+/// Issue 38, class 5: a real run whose photo or textures were altered after they were written
+/// is refused by `--resume`, `export` and `render-avatar`, naming the file and the tensor,
+/// instead of being trained on or exported.
+#[test]
+fn altered_run_files_are_named_not_trusted() {
+    let case = Case::new("altered");
+    let (img, pkl) = real_input(&case);
+    let run = case.s("run");
+    let args = train(
+        &case,
+        &[
+            "--image",
+            &img,
+            "--annotation",
+            &pkl,
+            "--iterations",
+            "3",
+            "--turntable",
+            "0",
+            "--out",
+            &run,
+        ],
+    );
+    case.succeeds(&strs(&args));
+    // Flips one bit near the end of a run file (inside its last tensor); returns the
+    // original bytes.
+    let flip = |name: &str| {
+        let path = case.path(&format!("run/{name}"));
+        let good = std::fs::read(&path).unwrap();
+        let mut bad = good.clone();
+        let at = bad.len() - 7;
+        bad[at] ^= 0x40;
+        std::fs::write(&path, bad).unwrap();
+        (path, good)
+    };
+    let resume = train(&case, &["--resume", &run, "--iterations", "4"]);
+    let glb = case.s("avatar.glb");
+    let png = case.s("render.png");
+    for file in ["input/images.safetensors", "textures/textures.safetensors"] {
+        let (path, good) = flip(file);
+        let name = file.rsplit('/').next().unwrap();
+        if file.starts_with("input") {
+            case.fails(&strs(&resume), 1, &[name, "is corrupt"]);
+        }
+        case.fails(
+            &["export", "--run", &run, "--out", &glb],
+            1,
+            &[name, "is corrupt"],
+        );
+        case.fails(
+            &["render-avatar", "--run", &run, "--out", &png],
+            1,
+            &[name, "is corrupt"],
+        );
+        std::fs::write(&path, good).unwrap();
+    }
+    case.succeeds(&["export", "--run", &run, "--out", &glb]);
+}

@@ -1,8 +1,14 @@
-//! Safetensors files: the one checked reader (metadata format, dtype, shape, finite values)
-//! and the one writer (encoded, then written atomically) that every crate's files go through.
-//! Errors are [`FileError::Format`] naming the file and the tensor.
+//! Safetensors files: the one checked reader (metadata format, dtype, shape, finite values,
+//! checksums) and the one writer (encoded, checksummed, then written atomically) that every
+//! crate's files go through. Errors are [`FileError::Format`] naming the file and the tensor.
+//!
+//! Every file written gets two metadata entries: [`CHECKSUMS`] (a JSON map from each tensor's
+//! name to the XXH3-64 of its bytes, 16 hex digits) and [`METADATA_CHECKSUM`] (the XXH3-64 of
+//! every other metadata entry, in key order). [`Reader::open`] verifies both when they are
+//! present, so a file changed or damaged after it was written is named as such instead of
+//! being trusted; files without them (written before) are read as they are.
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
 use safetensors::{Dtype, SafeTensors};
@@ -31,15 +37,53 @@ pub fn u32_bytes(values: impl IntoIterator<Item = u32>) -> Vec<u8> {
     values.into_iter().flat_map(u32::to_le_bytes).collect()
 }
 
-/// Serializes `tensors` with `metadata`; `path` names the file in errors.
+/// The metadata entry holding each tensor's checksum.
+pub const CHECKSUMS: &str = "checksums";
+
+/// The metadata entry holding the checksum of the other metadata entries.
+pub const METADATA_CHECKSUM: &str = "metadata_checksum";
+
+/// The checksum of some bytes: XXH3-64 as 16 hex digits.
+pub fn checksum(bytes: &[u8]) -> String {
+    format!("{:016x}", xxhash_rust::xxh3::xxh3_64(bytes))
+}
+
+/// The checksum of every metadata entry except [`METADATA_CHECKSUM`] itself, in key order.
+pub fn metadata_checksum(meta: &HashMap<String, String>) -> String {
+    let sorted: BTreeMap<&String, &String> = meta
+        .iter()
+        .filter(|(k, _)| k.as_str() != METADATA_CHECKSUM)
+        .collect();
+    let mut text = String::new();
+    for (k, v) in sorted {
+        text.push_str(k);
+        text.push('\0');
+        text.push_str(v);
+        text.push('\0');
+    }
+    checksum(text.as_bytes())
+}
+
+/// Serializes `tensors` with `metadata` and the checksums of both (the module's
+/// [`CHECKSUMS`] and [`METADATA_CHECKSUM`] entries, replacing any given); `path` names the
+/// file in errors.
 ///
 /// # Errors
 /// A tensor whose bytes do not fit its dtype and shape.
 pub fn serialize(
     path: &Path,
     tensors: &[Entry],
-    metadata: HashMap<String, String>,
+    mut metadata: HashMap<String, String>,
 ) -> Result<Vec<u8>, FileError> {
+    let sums: BTreeMap<&str, String> = tensors
+        .iter()
+        .map(|(name, _, _, bytes)| (name.as_str(), checksum(bytes)))
+        .collect();
+    let sums = serde_json::to_string(&sums)
+        .map_err(|e| FileError::format(path, format!("cannot encode the checksums: {e}")))?;
+    metadata.insert(CHECKSUMS.to_string(), sums);
+    let sum = metadata_checksum(&metadata);
+    metadata.insert(METADATA_CHECKSUM.to_string(), sum);
     let mut views = Vec::with_capacity(tensors.len());
     for (name, dtype, shape, bytes) in tensors {
         let view = safetensors::tensor::TensorView::new(*dtype, shape.clone(), bytes)
@@ -129,8 +173,10 @@ pub fn check_shape(name: &str, got: &[usize], want: &[Option<usize>]) -> Result<
 #[derive(Debug)]
 pub struct Reader<'a> {
     st: SafeTensors<'a>,
+    /// The metadata, without the checksum entries.
     meta: HashMap<String, String>,
     path: &'a Path,
+    checksummed: bool,
 }
 
 impl<'a> Reader<'a> {
@@ -157,7 +203,63 @@ impl<'a> Reader<'a> {
         let (_, meta) = SafeTensors::read_metadata(bytes)
             .map_err(|e| FileError::format(path, format!("bad safetensors header: {e}")))?;
         let meta = meta.metadata().clone().unwrap_or_default();
-        Ok(Reader { st, meta, path })
+        let mut reader = Reader {
+            st,
+            meta,
+            path,
+            checksummed: false,
+        };
+        reader.verify()?;
+        reader.checksummed = reader.meta.remove(CHECKSUMS).is_some();
+        reader.meta.remove(METADATA_CHECKSUM);
+        Ok(reader)
+    }
+
+    /// Whether the file carried checksums (all verified by [`Reader::open`]); files written
+    /// before checksums were added have none.
+    pub fn checksummed(&self) -> bool {
+        self.checksummed
+    }
+
+    /// Verifies the checksums [`serialize`] wrote, when the file has them: the metadata's,
+    /// then every tensor's (each tensor listed, none unlisted).
+    fn verify(&self) -> Result<(), FileError> {
+        let (sums, stored) = match (self.meta.get(CHECKSUMS), self.meta.get(METADATA_CHECKSUM)) {
+            (None, None) => return Ok(()),
+            (Some(s), Some(m)) => (s, m),
+            _ => {
+                return Err(self.err(format!(
+                    "the metadata is corrupt: it has only one of `{CHECKSUMS}` and \
+                     `{METADATA_CHECKSUM}`"
+                )));
+            }
+        };
+        let actual = metadata_checksum(&self.meta);
+        if &actual != stored {
+            return Err(self.err(format!(
+                "the metadata is corrupt: it was altered or damaged after the file was written \
+                 (its checksum is {actual}, the file says {stored})"
+            )));
+        }
+        let sums: BTreeMap<String, String> = serde_json::from_str(sums)
+            .map_err(|e| self.err(format!("metadata `{CHECKSUMS}` is not valid: {e}")))?;
+        let names = self.st.names();
+        if let Some(extra) = names.iter().find(|n| !sums.contains_key(**n)) {
+            return Err(self.err(format!(
+                "tensor `{extra}` is corrupt: it has no checksum, so it was added after the \
+                 file was written"
+            )));
+        }
+        for (name, sum) in &sums {
+            let actual = checksum(self.bytes(name)?);
+            if &actual != sum {
+                return Err(self.err(format!(
+                    "tensor `{name}` is corrupt: it was altered or damaged after the file was \
+                     written (its checksum is {actual}, the file says {sum})"
+                )));
+            }
+        }
+        Ok(())
     }
 
     /// A [`FileError::Format`] naming this file.
@@ -175,7 +277,7 @@ impl<'a> Reader<'a> {
         self.st.names()
     }
 
-    /// The metadata (empty when the file has none).
+    /// The metadata (empty when the file has none), without the checksum entries.
     pub fn metadata(&self) -> &HashMap<String, String> {
         &self.meta
     }
@@ -321,5 +423,58 @@ mod tests {
             r.values::<u32>("a", &[Some(1)]).unwrap(),
             (vec![1], vec![7])
         );
+    }
+
+    /// Issue 38, class 5: every file carries checksums, so a flipped byte in any tensor or in
+    /// the metadata is named instead of trusted; files without checksums still read.
+    #[test]
+    fn altered_files_are_named_and_files_without_checksums_read() {
+        let path = Path::new("textures.safetensors");
+        let entries: Vec<Entry> = vec![
+            (
+                "albedo".into(),
+                Dtype::F32,
+                vec![3],
+                f32_bytes(&[0.1, 0.2, 0.3]),
+            ),
+            ("light".into(), Dtype::F32, vec![2], f32_bytes(&[1.0, 0.5])),
+        ];
+        let meta = HashMap::from([("format".to_string(), "test".to_string())]);
+        let good = serialize(path, &entries, meta.clone()).unwrap();
+        let r = Reader::new(&good, path, "test").unwrap();
+        assert!(r.checksummed());
+        assert_eq!(r.metadata(), &meta);
+        let header = u64::from_le_bytes(good[..8].try_into().unwrap()) as usize + 8;
+        for at in header..good.len() {
+            let mut bad = good.clone();
+            bad[at] ^= 0x04;
+            let e = Reader::open(&bad, path).unwrap_err().to_string();
+            let tensor = if at < header + 12 { "albedo" } else { "light" };
+            assert!(
+                e.contains("textures.safetensors")
+                    && e.contains(&format!("tensor `{tensor}` is corrupt")),
+                "byte {at}: {e}"
+            );
+        }
+        let text = String::from_utf8_lossy(&good[8..header]).to_string();
+        let at = 8 + text.find("\"test\"").unwrap() + 1;
+        let mut bad = good.clone();
+        bad[at] = b'T';
+        let e = Reader::open(&bad, path).unwrap_err().to_string();
+        assert!(e.contains("the metadata is corrupt"), "{e}");
+        // A file written without checksums (by safetensors itself) is read as it is.
+        let views: Vec<(String, safetensors::tensor::TensorView)> = entries
+            .iter()
+            .map(|(n, d, sh, b)| {
+                (
+                    n.clone(),
+                    safetensors::tensor::TensorView::new(*d, sh.clone(), b).unwrap(),
+                )
+            })
+            .collect();
+        let plain = safetensors::serialize(views, Some(meta.clone())).unwrap();
+        let r = Reader::new(&plain, path, "test").unwrap();
+        assert!(!r.checksummed());
+        assert_eq!(r.finite_f32s("light", None).unwrap().1, vec![1.0, 0.5]);
     }
 }

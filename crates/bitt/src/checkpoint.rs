@@ -4,12 +4,12 @@
 //! Format `bitt-checkpoint-2`: tensors `param.i`, `adam_m.i`, `adam_v.i` (F32), `history`
 //! (F64 `[iterations, 7]`: the six loss terms and the total, bit-exact) and `progress` (F64
 //! `[lr_scale, seconds]`); metadata `iteration`, `parameters`, `adam_steps`, `events`,
-//! `tensors` (how many), `checksums` (XXH3-64 of every tensor's bytes) and `metadata_checksum`
-//! (XXH3-64 of the other metadata entries). Every count, checksum and shape is verified on
+//! `tensors` (how many), and the `checksums` and `metadata_checksum` that [`bitt_mesh::st`]
+//! writes into every file (and verifies). Every count, checksum and shape is verified on
 //! load, and what is wrong is named. Files of the earlier format `bitt-checkpoint-1`
 //! (progress as JSON text, no checksums) are still read.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::HashMap;
 use std::path::Path;
 
 use bitt_mesh::st;
@@ -61,27 +61,6 @@ fn f64_bytes(values: &[f64]) -> Vec<u8> {
     values.iter().flat_map(|v| v.to_le_bytes()).collect()
 }
 
-/// The checksum of a tensor's bytes (or of the metadata), as 16 hex digits.
-fn checksum(bytes: &[u8]) -> String {
-    format!("{:016x}", xxhash_rust::xxh3::xxh3_64(bytes))
-}
-
-/// The checksum of every metadata entry except `metadata_checksum` itself, in key order.
-fn metadata_checksum(meta: &HashMap<String, String>) -> String {
-    let sorted: BTreeMap<&String, &String> = meta
-        .iter()
-        .filter(|(k, _)| k.as_str() != "metadata_checksum")
-        .collect();
-    let mut text = String::new();
-    for (k, v) in sorted {
-        text.push_str(k);
-        text.push('\0');
-        text.push_str(v);
-        text.push('\0');
-    }
-    checksum(text.as_bytes())
-}
-
 impl Checkpoint {
     /// Writes the checkpoint to `path` atomically.
     pub fn save(&self, path: &Path) -> Result<(), BittError> {
@@ -119,14 +98,10 @@ impl Checkpoint {
             vec![2],
             f64_bytes(&[self.lr_scale, self.seconds]),
         ));
-        let checksums: BTreeMap<&str, String> = entries
-            .iter()
-            .map(|(name, _, _, bytes)| (name.as_str(), checksum(bytes)))
-            .collect();
         let json = |v: serde_json::Result<String>| {
             v.map_err(|e| BittError::corrupt(path, format!("cannot encode metadata: {e}")))
         };
-        let mut metadata = HashMap::from([
+        let metadata = HashMap::from([
             ("format".to_string(), CHECKPOINT_FORMAT.to_string()),
             ("iteration".to_string(), self.iteration.to_string()),
             ("parameters".to_string(), self.parameters.len().to_string()),
@@ -139,12 +114,8 @@ impl Checkpoint {
                 "events".to_string(),
                 json(serde_json::to_string(&self.events))?,
             ),
-            (
-                "checksums".to_string(),
-                json(serde_json::to_string(&checksums))?,
-            ),
         ]);
-        metadata.insert("metadata_checksum".into(), metadata_checksum(&metadata));
+        // `st` adds the checksums of every tensor and of the metadata.
         Ok(st::write(path, &entries, metadata)?)
     }
 
@@ -183,30 +154,17 @@ impl Checkpoint {
                 .map_err(|e| BittError::corrupt(path, format!("metadata `{key}`: {e}")))
         }
         if !legacy {
-            let stored = get("metadata_checksum")?;
-            let actual = metadata_checksum(meta);
-            if stored != actual {
-                return Err(bad(format!(
-                    "the metadata was altered: its checksum is {actual}, the file says {stored}"
-                )));
+            // `st::Reader::open` verified the checksums; a checkpoint must have them.
+            if !r.checksummed() {
+                return Err(bad("the file has no checksums".into()));
             }
-            let checksums: BTreeMap<String, String> = parse(&get("checksums")?, "checksums", path)?;
             let tensors: usize = parse(&get("tensors")?, "tensors", path)?;
             let names = r.names();
-            if names.len() != tensors || checksums.len() != tensors {
+            if names.len() != tensors {
                 return Err(bad(format!(
-                    "the file holds {} tensors and {} checksums; its metadata says {tensors}",
-                    names.len(),
-                    checksums.len()
+                    "the file holds {} tensors; its metadata says {tensors}",
+                    names.len()
                 )));
-            }
-            for (name, sum) in &checksums {
-                let actual = checksum(r.bytes(name)?);
-                if &actual != sum {
-                    return Err(bad(format!(
-                        "tensor {name} is corrupt: its checksum is {actual}, the file says {sum}"
-                    )));
-                }
             }
         }
         let iteration: usize = parse(&get("iteration")?, "iteration", path)?;
@@ -412,7 +370,7 @@ mod tests {
         let e = Checkpoint::from_bytes(&altered, &path)
             .unwrap_err()
             .to_string();
-        assert!(e.contains("metadata was altered"), "{e}");
+        assert!(e.contains("metadata is corrupt"), "{e}");
         // Counts are checked even when the checksums agree (a file written by a buggy writer).
         for (field, broken, expect) in [
             (

@@ -80,7 +80,7 @@ impl SavedRun {
     pub fn load(dir: &Path) -> Result<Self, BittError> {
         let context = |e: BittError| {
             BittError::Invalid(format!(
-                "{}: not a complete train-scene run: {e}",
+                "{}: not a complete and intact train-scene run: {e}",
                 dir.display()
             ))
         };
