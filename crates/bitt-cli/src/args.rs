@@ -100,9 +100,10 @@ pub struct KeypointArgs {
     /// its labels are read accordingly either way.)
     #[arg(long, requires = "keypoints")]
     pub mirrored: bool,
-    /// Camera intrinsics `fx,fy,cx,cy` in pixels of the photo. Default: focal length = the
-    /// image diagonal, principal point at the centre.
-    #[arg(long, requires = "keypoints")]
+    /// Camera intrinsics `fx,fy,cx,cy` in pixels of the photo, for the keypoint fit (of
+    /// --keypoints, or of the hands detected in a photo given alone). Default: focal length =
+    /// the image diagonal, principal point at the centre.
+    #[arg(long)]
     pub intrinsics: Option<String>,
     /// A keypoint-fit configuration (JSON, the `report.config` of a `fit.json`, edited).
     #[arg(long)]

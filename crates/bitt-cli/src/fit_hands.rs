@@ -119,6 +119,7 @@ pub fn run(args: &FitHandsArgs) -> Result<()> {
              --keypoints, against the photo; add --mask or drop --refine-config"
         );
     }
+    let intrinsics = args.keypoint.intrinsics()?;
     check_fit_out(&args.out)?;
     let device = args.device.device()?.autodiff();
     let (hands, prior) = args.hands.sources();
@@ -146,7 +147,7 @@ pub fn run(args: &FitHandsArgs) -> Result<()> {
     let done = fit_photo(
         image,
         keypoints,
-        args.keypoint.intrinsics()?,
+        intrinsics,
         args.mask.as_deref(),
         &hands,
         &prior,

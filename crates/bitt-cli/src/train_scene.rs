@@ -164,6 +164,32 @@ fn request(args: &TrainSceneArgs) -> Result<FreshRequest<'_>> {
              (--image without --annotation); it does not apply here"
         );
     }
+    // clap waives `requires = "keypoints"` when --annotation (which conflicts with it) is
+    // given, so the options that only apply to a keypoint file or a fit are checked here.
+    let keypoint_file_only = [
+        ("--format", args.keypoint.format.is_some()),
+        ("--mirrored", args.keypoint.mirrored),
+    ];
+    let fit_only = [("--intrinsics", args.keypoint.intrinsics.is_some())];
+    let ignored: Vec<&str> = keypoint_file_only
+        .iter()
+        .filter(|(_, given)| *given && args.keypoints.is_none())
+        .chain(
+            fit_only
+                .iter()
+                .filter(|(_, given)| *given && args.keypoints.is_none() && !photo_only),
+        )
+        .map(|(name, _)| *name)
+        .collect();
+    if !ignored.is_empty() {
+        bail!(
+            "{} {} not apply here: --format and --mirrored describe a --keypoints file, \
+             --intrinsics the camera of a keypoint fit (--keypoints, or --image alone); an \
+             annotation or a scene brings its own camera",
+            ignored.join(", "),
+            if ignored.len() == 1 { "does" } else { "do" }
+        );
+    }
     if args.refine_config.is_some() && !args.refine_mesh && !photo_only {
         bail!(
             "--refine-config configures --refine-mesh, or the refinement of a photo given alone \
@@ -181,6 +207,7 @@ fn request(args: &TrainSceneArgs) -> Result<FreshRequest<'_>> {
                 image,
                 mask: args.mask.as_deref(),
                 fit: args.keypoint.fit_config.clone(),
+                intrinsics: args.keypoint.intrinsics.clone(),
                 refine: refine_config(args.refine_config.as_deref(), None, None)?,
             },
         },
@@ -904,6 +931,48 @@ mod tests {
             e.contains("--fit-config") && e.contains("does not apply"),
             "{e}"
         );
+        // Issue 38, class 4: keypoint-file and fit options next to an annotation (clap waives
+        // their `requires` there) are refused, naming them, instead of being ignored.
+        for (extra, named) in [
+            (
+                &["--intrinsics", "0,0,0,0"][..],
+                "--intrinsics does not apply",
+            ),
+            (&["--format", "openpose"][..], "--format does not apply"),
+            (&["--mirrored"][..], "--mirrored does not apply"),
+            (
+                &["--mirrored", "--intrinsics", "9,9,1,1"][..],
+                "--mirrored, --intrinsics do not apply",
+            ),
+        ] {
+            let mut all = vec![
+                "--image",
+                s(&img),
+                "--annotation",
+                s(&pkl),
+                "--out",
+                s(&out),
+            ];
+            all.extend(extra);
+            let e = format!("{:#}", run(&args(&all)).unwrap_err());
+            assert!(e.contains(named), "{extra:?}: {e}");
+        }
+        // With a photo alone, --intrinsics is the fit's camera: parsed (and refused when bad)
+        // before the photo is even read.
+        let e = format!(
+            "{:#}",
+            run(&args(&[
+                "--image",
+                s(&img),
+                "--intrinsics",
+                "0,0,0,0",
+                "--out",
+                s(&out)
+            ]))
+            .unwrap_err()
+        );
+        assert!(e.contains("--intrinsics \"0,0,0,0\""), "{e}");
+        assert!(!out.exists());
         // Malformed keypoints are named and leave no run folder.
         let bad_kp = dir.join("bad_keypoints.json");
         std::fs::write(&bad_kp, r#"{"right": [[1, 2, 1]]}"#).unwrap();

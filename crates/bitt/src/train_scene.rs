@@ -94,6 +94,8 @@ pub enum SceneInput<'a> {
         mask: Option<&'a Path>,
         /// The keypoint fit's configuration file (`None`: the default configuration).
         fit: Option<PathBuf>,
+        /// Camera intrinsics `fx,fy,cx,cy` in pixels, as text (`None`: the default camera).
+        intrinsics: Option<String>,
         /// The refinement's configuration.
         refine: RefineConfig,
     },
@@ -263,8 +265,13 @@ pub fn fresh_run(
             image,
             mask,
             fit,
+            intrinsics,
             refine: photo_refine,
         } => {
+            let intrinsics = intrinsics
+                .as_deref()
+                .map(crate::fit::parse_intrinsics)
+                .transpose()?;
             observer.say(PHOTO_ONLY_LINE);
             let found = crate::detect::detect_photo(image, device)?;
             for line in found.lines() {
@@ -278,7 +285,7 @@ pub fn fresh_run(
             let done = fit_photo(
                 image,
                 PhotoKeypoints::Detected(Box::new(found)),
-                None,
+                intrinsics,
                 *mask,
                 hands,
                 prior,
