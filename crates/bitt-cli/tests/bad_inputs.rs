@@ -185,8 +185,12 @@ fn broken_images_are_refused_naming_the_file() {
     std::fs::write(case.path("half.png"), &png[..png.len() / 2]).unwrap();
     std::fs::write(case.path("text.jpg"), "not an image").unwrap();
     write_image(&case.path("small.jpg"), 100, 80, None);
+    // Issue 38, class 10: a photo that decodes but is black where the hands are (a corrupt
+    // or wrong image) is named as such, not trained on.
+    write_image(&case.path("black.png"), 256, 256, Some(&|_, _| [3, 3, 3]));
     let out = case.s("run");
     for (file, problem) in [
+        ("black.png", "too dark where the hands are"),
         ("half.jpg", "truncated JPEG"),
         ("half.png", "half.png"),
         ("text.jpg", "text.jpg"),
@@ -641,4 +645,12 @@ fn altered_run_files_are_named_not_trusted() {
         std::fs::write(&path, good).unwrap();
     }
     case.succeeds(&["export", "--run", &run, "--out", &glb]);
+    // Issue 38, class 10: a run without its input record is named as such (not as a missing
+    // scene/scene.json, which a real run never has).
+    std::fs::remove_file(case.path("run/input.json")).unwrap();
+    case.fails(
+        &["export", "--run", &run, "--out", &glb],
+        1,
+        &["input.json", "input is missing"],
+    );
 }

@@ -10,6 +10,11 @@ use burn::tensor::{Device, Gradients, Tensor, TensorData};
 
 use crate::config::OptimConfig;
 
+/// The largest Adam step a keypoint fit or a refinement may start from: one radian of
+/// rotation (or one translation or shape unit) per iteration. The defaults are 0.02 (fit)
+/// and 0.01 (refinement); 1e30 used to surface as a non-finite loss naming neither.
+pub const MAX_LEARNING_RATE: f64 = 1.0;
+
 /// Per-parameter Adam moments, flattened, on the training device without autodiff.
 #[derive(Debug, Clone, Default)]
 pub struct AdamState {

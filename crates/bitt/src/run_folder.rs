@@ -16,6 +16,20 @@ use crate::refine::Refinement;
 use crate::run::{files, write_training_refinement};
 use crate::trainer::{Trainer, previous_checkpoint_path};
 
+/// What is wrong when run folder `dir` holds neither input record: `input.json` (a real
+/// run) nor `scene/scene.json` (a synthetic run); `None` when it holds one.
+pub fn missing_input(dir: &Path) -> Option<String> {
+    let scene = dir.join(files::SCENE).join("scene.json");
+    (!RealInput::is_real_run(dir) && !scene.is_file()).then(|| {
+        format!(
+            "the run's input is missing: neither {} (real data) nor {} (a synthetic scene) is \
+             there",
+            dir.join(crate::real::files::INPUT).display(),
+            scene.display()
+        )
+    })
+}
+
 /// The keypoint fit's record in a run folder (`train-scene --keypoints`).
 pub const FIT_RECORD: &str = "fit.json";
 

@@ -84,6 +84,12 @@ impl SavedRun {
                 dir.display()
             ))
         };
+        if let Some(missing) = crate::run_folder::missing_input(dir) {
+            return Err(BittError::Invalid(format!(
+                "{}: not a complete and intact train-scene run: {missing}",
+                dir.display()
+            )));
+        }
         Ok(if RealInput::is_real_run(dir) {
             let avatar = RealAvatar::load(dir).map_err(context)?;
             let assets = avatar.assets().map_err(|e| {

@@ -30,7 +30,7 @@ use crate::refine::{
     MeshRefine, RefineConfig, RefineObserver, Refinement, pca_pose_notes, refine_synthetic,
 };
 use crate::run::{RunSummary, files, synthetic_trainer, texture_prior_with_progress, write_run};
-use crate::run_folder::{FitOutput, RunInput, load_checkpoints, write_fresh_run};
+use crate::run_folder::{FitOutput, RunInput, load_checkpoints, missing_input, write_fresh_run};
 use crate::trainer::Trainer;
 
 /// What the setup of a run tells on the way: lines for the user, and progress displays for
@@ -526,13 +526,10 @@ pub fn resumed_run(
     }
     // The run's input: `input.json` for real data, `scene/` for a synthetic scene.
     let real = RealInput::is_real_run(dir);
-    if !real && !dir.join(files::SCENE).join("scene.json").is_file() {
+    if let Some(missing) = missing_input(dir) {
         return Err(BittError::Invalid(format!(
-            "--resume {}: the run's input is missing: neither {} (real data) nor {} \
-             (a synthetic scene) is there",
-            dir.display(),
-            dir.join(crate::real::files::INPUT).display(),
-            dir.join(files::SCENE).join("scene.json").display()
+            "--resume {}: {missing}",
+            dir.display()
         )));
     }
     let (checkpoint, previous, warnings) = load_checkpoints(dir)

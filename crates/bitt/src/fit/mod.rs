@@ -40,7 +40,7 @@ use crate::BittError;
 use crate::config::OptimConfig;
 use crate::hand_layer::{HandLayer, HandLayerParams, host_params};
 use crate::hand_priors::{FLEXION_RANGE, HandPriors, flexion_angles, flexion_axes};
-use crate::optim::Adam;
+use crate::optim::{Adam, MAX_LEARNING_RATE};
 
 pub use eval::{
     FitScores, SceneFitResult, SyntheticFitSettings, SyntheticKeypoints, fit_eval_line,
@@ -162,6 +162,13 @@ impl FitConfig {
                     "fit.{name} must be positive, got {v}"
                 )));
             }
+        }
+        if self.learning_rate > MAX_LEARNING_RATE {
+            return Err(BittError::Invalid(format!(
+                "fit.learning_rate {} is above {MAX_LEARNING_RATE}: an Adam step of more \
+                 than a radian (or {} translation units) per iteration only diverges",
+                self.learning_rate, MAX_LEARNING_RATE
+            )));
         }
         if !(0.0..=1.0).contains(&self.final_lr_fraction) {
             return Err(BittError::Invalid(
@@ -668,8 +675,10 @@ impl Fitter<'_> {
             );
             if !value.is_finite() {
                 return Err(BittError::NonFinite(format!(
-                    "keypoint fit loss at {stage} iteration {}",
-                    it + 1
+                    "keypoint fit loss at {stage} iteration {} (the fit diverged: check \
+                     fit.learning_rate, {} here, and the camera's intrinsics)",
+                    it + 1,
+                    config.learning_rate
                 )));
             }
             if it == 0 {
@@ -1311,6 +1320,27 @@ mod tests {
             e.contains("m from the camera (a photographed hand lies 0.05 to 20 m"),
             "{e}"
         );
+    }
+
+    /// Issue 38, class 10: a learning rate of 1e30 is named as such, not as a non-finite loss.
+    #[test]
+    fn absurd_learning_rates_are_named() {
+        let fit = FitConfig {
+            learning_rate: 1e30,
+            ..FitConfig::default()
+        };
+        let e = fit.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("fit.learning_rate 1000000000000000000000000000000 is above 1"),
+            "{e}"
+        );
+        let refine = crate::refine::RefineConfig {
+            learning_rate: 2.0,
+            ..Default::default()
+        };
+        let e = refine.validate().unwrap_err().to_string();
+        assert!(e.contains("refine.learning_rate 2 is above 1"), "{e}");
+        FitConfig::default().validate().unwrap();
     }
 
     #[test]

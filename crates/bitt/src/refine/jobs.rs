@@ -252,8 +252,9 @@ impl PhotoRefinement {
     }
 }
 
-/// Reads a mask image (PNG or JPEG; a pixel is hand when its mean channel value is above 0.5)
-/// and checks it against the photo's size.
+/// Reads a mask image (PNG or JPEG; a pixel is hand when its brightest channel is above 0.5:
+/// white, or the red and green of `bitt synth`'s `<view>.mask.png`) and checks it against the
+/// photo's size.
 ///
 /// # Errors
 /// An unreadable file, a size other than `[h, w]`, or more than [`MAX_MASK_FRACTION`] of
@@ -268,7 +269,13 @@ pub fn read_mask(path: &Path, [h, w]: [usize; 2]) -> Result<Vec<f32>, BittError>
             img.height
         )));
     }
-    let mask = threshold_mask(&img.data, h * w, 0.5);
+    let hw = h * w;
+    let mask: Vec<f32> = (0..hw)
+        .map(|p| {
+            let brightest = img.data[p].max(img.data[hw + p]).max(img.data[2 * hw + p]);
+            if brightest > 0.5 { 1.0 } else { 0.0 }
+        })
+        .collect();
     let fraction = mask.iter().filter(|&&m| m > 0.5).count() as f64 / (h * w) as f64;
     if fraction > MAX_MASK_FRACTION {
         return Err(BittError::Invalid(format!(
@@ -481,4 +488,38 @@ pub fn write_refine_outputs(
         (REFINE.into(), json_bytes(&out.join(REFINE), record)?),
     ];
     crate::outputs::write_own_folder(out, REFINE, "refine-hands", &REFINE_NAMES, &files)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Issue 38, classes 3 and 10: a mask is hand where its brightest channel is bright (so
+    /// `bitt synth`'s red/green masks are not "empty"), and a mask marking nearly the whole
+    /// photo is refused.
+    #[test]
+    fn masks_read_by_their_brightest_channel_and_blank_ones_are_refused() {
+        let dir = std::env::temp_dir().join(format!("bitt-read-mask-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (w, h) = (8usize, 4usize);
+        // Red on the left half, green on the right half of the top row, black elsewhere.
+        let mut rgb = vec![0.0f32; 3 * w * h];
+        for x in 0..w {
+            let channel = if x < w / 2 { 0 } else { 1 };
+            rgb[channel * w * h + x] = 1.0;
+        }
+        let path = dir.join("train.mask.png");
+        bitt_texture::save_png8(&path, &rgb, w, h).unwrap();
+        let mask = read_mask(&path, [h, w]).unwrap();
+        assert_eq!(mask.iter().filter(|&&m| m > 0.5).count(), w);
+        assert!(mask[..w].iter().all(|&m| m == 1.0));
+        let white = dir.join("white.png");
+        bitt_texture::save_png8(&white, &vec![1.0; 3 * w * h], w, h).unwrap();
+        let e = read_mask(&white, [h, w]).unwrap_err().to_string();
+        assert!(
+            e.contains("white.png") && e.contains("100.0% of the photo"),
+            "{e}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

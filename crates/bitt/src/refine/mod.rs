@@ -41,7 +41,7 @@ use crate::config::OptimConfig;
 use crate::hand_layer::{HandLayer, HandLayerParams, has_learned_pose_pca, host_params};
 use crate::hand_priors::HandPriors;
 use crate::metrics::mask_iou;
-use crate::optim::Adam;
+use crate::optim::{Adam, MAX_LEARNING_RATE};
 use crate::pipeline::point_light;
 
 pub use crate::outputs::overlay_scale;
@@ -165,6 +165,13 @@ impl RefineConfig {
                     "refine.{name} must be positive, got {v}"
                 )));
             }
+        }
+        if self.learning_rate > MAX_LEARNING_RATE {
+            return Err(BittError::Invalid(format!(
+                "refine.learning_rate {} is above {MAX_LEARNING_RATE}: an Adam step of more \
+                 than a radian (or {} translation units) per iteration only diverges",
+                self.learning_rate, MAX_LEARNING_RATE
+            )));
         }
         if !(0.0..=1.0).contains(&self.final_lr_fraction) {
             return Err(BittError::Invalid(
