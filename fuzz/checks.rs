@@ -9,12 +9,13 @@
 use std::path::Path;
 
 use bitt_mesh::annotation::bitt_annotation_from_bytes;
+use bitt_mesh::camera::{check_intrinsics_for_image, parse_intrinsics, parse_orbit_view};
 use bitt_mesh::glam::DVec3;
 use bitt_mesh::interhand::{InterHandDataset, InterHandPaths, InterHandSelection};
 use bitt_mesh::keypoints::{KeypointFormat, KeypointOptions, parse_keypoints};
 use bitt_mesh::mano::{from_safetensors, to_safetensors};
 use bitt_mesh::model::{MANO_PARENTS, NUM_BETAS, NUM_JOINTS, NUM_POSE, NUM_POSE_FEATURES};
-use bitt_mesh::{HandModel, HandPair, HandParams, Side};
+use bitt_mesh::{HandModel, HandPair, HandParams, PinholeCamera, Side};
 use bitt_pickle::{PickleError, Value};
 
 /// A pickle reader's result: a self-consistent value, or an error that names `name` and
@@ -188,12 +189,58 @@ pub fn keypoints(data: &[u8]) -> bool {
         Ok(k) => {
             let text = k.to_plain_json();
             let _ = k.scaled(0.5, 2.0).mirrored(640.0);
+            // The plausibility checks (issue 38) take any parsed file without panicking.
+            let _ = k.check_plausible();
+            let _ = Side::BOTH.map(|s| k.span_px(s));
             let back = parse_keypoints(text.as_bytes(), path, &KeypointOptions::default());
             assert!(back.is_ok(), "{text}: {back:?}");
             true
         }
         Err(e) => {
             assert!(e.to_string().starts_with("fuzz_keypoints.json: "), "{e}");
+            false
+        }
+    }
+}
+
+/// The camera values users type (`--intrinsics`, `render-avatar --view`; bitt-mesh
+/// `camera::parse_intrinsics`, `check_intrinsics_for_image`, `parse_orbit_view`). The first
+/// byte picks the parser (bit 0) and the photo size (bits 1-2), the rest is the text.
+/// Accepted intrinsics always make a camera of that photo.
+pub fn camera_values(data: &[u8]) -> bool {
+    let Some((&sel, rest)) = data.split_first() else {
+        return false;
+    };
+    let Ok(text) = std::str::from_utf8(rest) else {
+        return false;
+    };
+    if sel & 1 == 1 {
+        return match parse_orbit_view(text) {
+            Ok((az, el)) => {
+                assert!(az.is_finite() && el.is_finite(), "{text:?}");
+                true
+            }
+            Err(e) => {
+                assert!(!e.is_empty());
+                false
+            }
+        };
+    }
+    match parse_intrinsics(text) {
+        Ok(k) => {
+            assert!(
+                k.iter().all(|x| x.is_finite()) && k[0] > 0.0 && k[1] > 0.0,
+                "{k:?}"
+            );
+            let [w, h] = [[640u32, 480], [1, 1], [4000, 3000], [0, 0]][usize::from((sel >> 1) & 3)];
+            if check_intrinsics_for_image(k, [w as usize, h as usize]).is_ok() {
+                let camera = PinholeCamera::from_intrinsics([k[0], k[1]], [k[2], k[3]], w, h);
+                assert!(camera.is_ok(), "{k:?} {w}x{h}: {camera:?}");
+            }
+            true
+        }
+        Err(e) => {
+            assert!(e.starts_with("--intrinsics "), "{e}");
             false
         }
     }

@@ -259,6 +259,15 @@ pub fn seeds() -> Vec<(&'static str, String, Vec<u8>)> {
         let bytes = [vec![sel], text.into_bytes()].concat();
         out.push(("keypoints", format!("seed_{name}.json"), bytes));
     }
+    // Camera values (first byte: bit 0 picks --view over --intrinsics, bits 1-2 the photo).
+    for (name, sel, text) in [
+        ("intrinsics", 0u8, "600,600,320,240"),
+        ("intrinsics_4000", 4, "3600, 3600, 2000.5, 1500"),
+        ("view", 1, "30,-15"),
+    ] {
+        let bytes = [vec![sel], text.as_bytes().to_vec()].concat();
+        out.push(("camera_values", format!("seed_{name}.txt"), bytes));
+    }
     out
 }
 

@@ -55,6 +55,11 @@ fn annotation_corpus_replays() {
 }
 
 #[test]
+fn camera_values_corpus_replays() {
+    replay("camera_values", checks::camera_values);
+}
+
+#[test]
 fn interhand_corpus_replays() {
     replay("interhand", checks::interhand);
 }

@@ -12,7 +12,7 @@ use anyhow::{Context, Result, bail};
 use crate::{check, root};
 
 /// Every target with its `-max_len` (a little above its largest seed).
-const TARGETS: [(&str, usize, &str); 6] = [
+const TARGETS: [(&str, usize, &str); 7] = [
     ("from_bytes", 4096, "pickles (bitt-pickle from_bytes)"),
     (
         "torch",
@@ -37,13 +37,20 @@ const TARGETS: [(&str, usize, &str); 6] = [
     (
         "keypoints",
         4096,
-        "2D keypoint JSON (bitt-mesh parse_keypoints)",
+        "2D keypoint JSON and its plausibility checks (bitt-mesh parse_keypoints, \
+         check_plausible)",
+    ),
+    (
+        "camera_values",
+        256,
+        "--intrinsics and --view (bitt-mesh camera::parse_intrinsics, \
+         check_intrinsics_for_image, parse_orbit_view)",
     ),
 ];
 
 const USAGE: &str = "usage: cargo xtask fuzz [TARGET|all] [--seconds N | --runs N] \
                      (TARGET: from_bytes, torch, mano_safetensors, annotation, interhand, \
-                     keypoints; default: all, 60 seconds each)";
+                     keypoints, camera_values; default: all, 60 seconds each)";
 
 /// How long each target runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -28,7 +28,7 @@ pub struct RenderAvatarArgs {
     #[arg(long)]
     pub run: PathBuf,
     /// Orbit the camera about the hands: azimuth and elevation in degrees.
-    #[arg(long, default_value = "0,0", value_parser = parse_view, allow_hyphen_values = true)]
+    #[arg(long, default_value = "0,0", value_parser = bitt_mesh::camera::parse_orbit_view, allow_hyphen_values = true)]
     pub view: (f64, f64),
     /// Pose the hands as novel pose K of the run's scene (default: the training pose).
     #[arg(long, conflicts_with_all = ["pose", "procedural_pose"])]
@@ -57,22 +57,6 @@ pub struct RenderAvatarArgs {
     /// Output PNG.
     #[arg(long)]
     pub out: PathBuf,
-}
-
-fn parse_view(s: &str) -> Result<(f64, f64), String> {
-    let parts: Vec<&str> = s.split(',').collect();
-    let [a, e] = parts.as_slice() else {
-        return Err(format!("expected AZ,EL in degrees, got {s:?}"));
-    };
-    let a: f64 = a.trim().parse().map_err(|_| format!("bad azimuth {a:?}"))?;
-    let e: f64 = e
-        .trim()
-        .parse()
-        .map_err(|_| format!("bad elevation {e:?}"))?;
-    if !(a.is_finite() && e.is_finite()) {
-        return Err(format!("view {s:?} is not finite"));
-    }
-    Ok((a, e))
 }
 
 /// `bitt render-avatar`.

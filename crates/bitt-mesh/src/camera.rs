@@ -13,6 +13,102 @@ use crate::MeshError;
 /// the wrong units), not a photo.
 pub const HAND_DEPTH_RANGE_M: [f64; 2] = [0.05, 20.0];
 
+// ---------------------------------------------------------------------------------------------
+// Camera values as users type them (`--intrinsics`, `--view`): parsed and checked here, below
+// burn, so the fuzz targets reach them.
+
+/// `fx,fy,cx,cy` (pixels) as four positive-focal numbers.
+///
+/// # Errors
+/// Not four finite numbers, or a focal length that is not positive.
+pub fn parse_intrinsics(text: &str) -> Result<[f64; 4], String> {
+    let values: Vec<&str> = text.split(',').map(str::trim).collect();
+    let bad = |why: String| {
+        format!(
+            "--intrinsics {text:?}: {why} (expected fx,fy,cx,cy in pixels, e.g. 600,600,320,240)"
+        )
+    };
+    if values.len() != 4 {
+        return Err(bad(format!("{} values", values.len())));
+    }
+    let mut out = [0.0; 4];
+    for (o, v) in out.iter_mut().zip(&values) {
+        *o = v
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| bad(format!("{v:?} is not a finite number")))?;
+    }
+    if out[0] <= 0.0 || out[1] <= 0.0 {
+        return Err(bad("the focal lengths must be positive".into()));
+    }
+    Ok(out)
+}
+
+/// The focal lengths `--intrinsics` may give, as multiples of the photo's long side: a
+/// fisheye-wide 0.05 to a telephoto 100. Outside, the fit's residuals are meaningless
+/// (infinite at 1e-30) rather than large (issue 38).
+pub const FOCAL_RANGE_OF_LONG_SIDE: [f64; 2] = [0.05, 100.0];
+
+/// Checks `--intrinsics` against the photo (`[w, h]` pixels): focal lengths within
+/// [`FOCAL_RANGE_OF_LONG_SIDE`], the principal point within the image widened by its own size
+/// on every side (a crop's principal point may lie off its centre, not a photo away).
+///
+/// # Errors
+/// What is wrong, naming `--intrinsics`, the value and the allowed range.
+pub fn check_intrinsics_for_image(
+    [fx, fy, cx, cy]: [f64; 4],
+    [w, h]: [usize; 2],
+) -> Result<(), String> {
+    let (w, h) = (w as f64, h as f64);
+    let long = w.max(h);
+    let [lo, hi] = FOCAL_RANGE_OF_LONG_SIDE;
+    let bad = |why: String| {
+        Err(format!(
+            "--intrinsics {fx},{fy},{cx},{cy}: {why} for the {w}x{h} photo"
+        ))
+    };
+    for (name, f) in [("fx", fx), ("fy", fy)] {
+        if !(lo * long..=hi * long).contains(&f) {
+            return bad(format!(
+                "{name} = {f} px is not between {} and {} px ({lo} to {hi} times the long side)",
+                lo * long,
+                hi * long
+            ));
+        }
+    }
+    if !(-w..=2.0 * w).contains(&cx) || !(-h..=2.0 * h).contains(&cy) {
+        return bad(format!(
+            "the principal point ({cx}, {cy}) is not within ({}, {}) to ({}, {})",
+            -w,
+            -h,
+            2.0 * w,
+            2.0 * h
+        ));
+    }
+    Ok(())
+}
+
+/// `AZ,EL` (degrees) of an orbit view, as `render-avatar --view` takes it: two finite numbers.
+///
+/// # Errors
+/// What is wrong, naming the value.
+pub fn parse_orbit_view(s: &str) -> Result<(f64, f64), String> {
+    let parts: Vec<&str> = s.split(',').collect();
+    let [a, e] = parts.as_slice() else {
+        return Err(format!("expected AZ,EL in degrees, got {s:?}"));
+    };
+    let a: f64 = a.trim().parse().map_err(|_| format!("bad azimuth {a:?}"))?;
+    let e: f64 = e
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad elevation {e:?}"))?;
+    if !(a.is_finite() && e.is_finite()) {
+        return Err(format!("view {s:?} is not finite"));
+    }
+    Ok((a, e))
+}
+
 /// A pinhole camera: `x_cam = R x_world + t`, `pixel = K x_cam / z_cam`.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PinholeCamera {

@@ -252,20 +252,63 @@ pub fn write_sheet(
     Ok(())
 }
 
-/// Reads every scene result under `dirs[k]/scenes/` (the first of each scene and setting
-/// wins) and writes `results.json` and `results.md` into `dirs[0]`; returns `results.md`.
+/// Reads every scene result under `dirs[k]/scenes/` and writes `results.json` and
+/// `results.md` into `dirs[0]`; returns `results.md`. The folders must be evaluations of one
+/// plan (their `config.json` equal: shards of one evaluation), and a scene and setting found
+/// in two folders must have the same scores there (timings aside), else nothing is written.
+///
+/// # Errors
+/// A folder that is not an evaluation, folders of different plans (naming what differs), two
+/// results of one scene that disagree (naming both files), a result file that is not one, or
+/// no result at all.
 pub fn merge(dirs: &[PathBuf]) -> Result<String, BittError> {
-    let mut results: Vec<SceneResult> = Vec::new();
+    let mut plan: Option<(&PathBuf, serde_json::Value)> = None;
     for dir in dirs {
-        for r in read_results(&dir.join("scenes"))? {
-            if !results
-                .iter()
-                .any(|x| x.seed == r.seed && x.setting == r.setting)
-            {
-                results.push(r);
+        let this = read_plan(dir)?;
+        match &plan {
+            None => plan = Some((dir, this)),
+            Some((first, p)) => {
+                let differ: Vec<&str> = PLAN_KEYS
+                    .iter()
+                    .copied()
+                    .filter(|k| p[*k] != this[*k])
+                    .collect();
+                if !differ.is_empty() {
+                    return Err(BittError::Invalid(format!(
+                        "{} and {} are evaluations of other settings ({} differ in their \
+                         config.json): their results cannot share one table; nothing was written",
+                        first.display(),
+                        dir.display(),
+                        differ.join(", ")
+                    )));
+                }
             }
         }
     }
+    let mut results: Vec<(PathBuf, SceneResult)> = Vec::new();
+    for dir in dirs {
+        for (path, r) in read_results(&dir.join("scenes"))? {
+            match results
+                .iter()
+                .find(|(_, x)| x.seed == r.seed && x.setting == r.setting)
+            {
+                None => results.push((path, r)),
+                Some((_, x)) if same_scores(x, &r)? => {}
+                Some((kept, _)) => {
+                    return Err(BittError::Invalid(format!(
+                        "{} and {} are results of the same scene ({}, {}) that disagree: one \
+                         of them was made with other settings or changed; remove the wrong one \
+                         and merge again (nothing was written)",
+                        kept.display(),
+                        path.display(),
+                        r.seed,
+                        r.setting.key()
+                    )));
+                }
+            }
+        }
+    }
+    let results: Vec<SceneResult> = results.into_iter().map(|(_, r)| r).collect();
     let Some(out) = dirs.first().filter(|_| !results.is_empty()) else {
         return Err(BittError::Invalid(format!(
             "no scene results under {}",
@@ -307,8 +350,51 @@ pub fn merge(dirs: &[PathBuf]) -> Result<String, BittError> {
     Ok(md)
 }
 
-/// The scene results in one `scenes/` folder, in file-name order.
-fn read_results(scenes: &Path) -> Result<Vec<SceneResult>, BittError> {
+/// The plan (`config.json`) of evaluation folder `dir`.
+///
+/// # Errors
+/// A folder without the `config.json` of an evaluation.
+fn read_plan(dir: &Path) -> Result<serde_json::Value, BittError> {
+    let path = dir.join("config.json");
+    std::fs::read_to_string(&path)
+        .ok()
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .filter(|v| {
+            v.as_object()
+                .is_some_and(|o| PLAN_KEYS.iter().all(|k| o.contains_key(*k)))
+        })
+        .ok_or_else(|| {
+            BittError::Invalid(format!(
+                "{}: not an evaluation folder (no config.json of one), so its results' settings \
+                 are unknown; nothing was written",
+                dir.display()
+            ))
+        })
+}
+
+/// Whether two results of one scene agree on everything but their timings (`seconds`).
+fn same_scores(a: &SceneResult, b: &SceneResult) -> Result<bool, BittError> {
+    fn without_timings(v: &mut serde_json::Value) {
+        match v {
+            serde_json::Value::Object(o) => {
+                o.remove("seconds");
+                o.values_mut().for_each(without_timings);
+            }
+            serde_json::Value::Array(a) => a.iter_mut().for_each(without_timings),
+            _ => {}
+        }
+    }
+    let value = |r: &SceneResult| -> Result<serde_json::Value, BittError> {
+        let mut v = serde_json::to_value(r)
+            .map_err(|e| BittError::Invalid(format!("cannot encode a scene result: {e}")))?;
+        without_timings(&mut v);
+        Ok(v)
+    };
+    Ok(value(a)? == value(b)?)
+}
+
+/// The scene results in one `scenes/` folder with their files, in file-name order.
+fn read_results(scenes: &Path) -> Result<Vec<(PathBuf, SceneResult)>, BittError> {
     let entries = std::fs::read_dir(scenes).map_err(|e| BittError::io(scenes, e))?;
     let mut paths: Vec<PathBuf> = entries
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -327,7 +413,7 @@ fn read_results(scenes: &Path) -> Result<Vec<SceneResult>, BittError> {
                     format!("format {} (expected {SCENE_RESULT_FORMAT})", r.format),
                 ));
             }
-            Ok(r)
+            Ok((p.clone(), r))
         })
         .collect()
 }
@@ -422,11 +508,21 @@ mod tests {
         assert_ne!(a, interhand_scene_id("val", 0, 10, "400262"));
     }
 
-    /// Finished scenes are skipped, and merging shard folders keeps the first result of each
-    /// scene and setting.
+    /// Finished scenes are skipped; merging shard folders of one plan keeps one result of
+    /// each scene and setting. Issue 38, class 7: folders of other plans, folders without a
+    /// plan and two disagreeing results of one scene are refused, writing nothing.
     #[test]
-    fn resume_skips_finished_scenes_and_merge_dedups() {
+    fn resume_skips_finished_scenes_and_merge_refuses_mismatches() {
         let (a, b) = (scratch("a"), scratch("b"));
+        let plan = |scenes: usize| {
+            serde_json::json!({
+                "train": "t", "baseline": "b", "methods": ["bitt"], "settings": ["gt-mesh"],
+                "scenes": scenes, "dataset": "synthetic",
+            })
+        };
+        for d in [&a, &b] {
+            write_json(&d.join("config.json"), &plan(2)).unwrap();
+        }
         let settings = MeshSetting::ALL;
         let done = result(7, MeshSetting::GtMesh, "first");
         write_json(&result_path(&a, done.setting, done.seed), &done).unwrap();
@@ -438,10 +534,8 @@ mod tests {
                 (8, MeshSetting::NoisyMesh)
             ]
         );
-        for r in [
-            result(7, MeshSetting::GtMesh, "second"),
-            result(8, MeshSetting::GtMesh, "b"),
-        ] {
+        // The same scene in both shards, with the same scores: kept once.
+        for r in [done.clone(), result(8, MeshSetting::GtMesh, "b")] {
             write_json(&result_path(&b, r.setting, r.seed), &r).unwrap();
         }
         merge(&[a.clone(), b.clone()]).unwrap();
@@ -456,6 +550,27 @@ mod tests {
             .collect();
         assert_eq!(presets, ["first", "b"]);
         assert!(a.join("results.md").is_file());
+        let before = std::fs::read(a.join("results.json")).unwrap();
+        // Two results of one scene that disagree: both files named, nothing written.
+        let other = result(7, MeshSetting::GtMesh, "second");
+        write_json(&result_path(&b, other.setting, other.seed), &other).unwrap();
+        let e = merge(&[a.clone(), b.clone()]).unwrap_err().to_string();
+        assert!(
+            e.contains("disagree") && e.contains("bitt-folder-a") && e.contains("bitt-folder-b"),
+            "{e}"
+        );
+        assert_eq!(std::fs::read(a.join("results.json")).unwrap(), before);
+        write_json(&result_path(&b, done.setting, done.seed), &done).unwrap();
+        // A shard of another plan.
+        write_json(&b.join("config.json"), &plan(3)).unwrap();
+        let e = merge(&[a.clone(), b.clone()]).unwrap_err().to_string();
+        assert!(e.contains("scenes differ"), "{e}");
+        // A folder without a plan.
+        std::fs::remove_file(b.join("config.json")).unwrap();
+        let e = merge(&[a.clone(), b.clone()]).unwrap_err().to_string();
+        assert!(e.contains("not an evaluation folder"), "{e}");
+        assert_eq!(std::fs::read(a.join("results.json")).unwrap(), before);
+        write_json(&b.join("config.json"), &plan(2)).unwrap();
         // A wrong format is refused; an empty folder has nothing to merge.
         let mut old = result(9, MeshSetting::GtMesh, "old");
         old.format = "old".into();
@@ -463,6 +578,7 @@ mod tests {
         let e = merge(std::slice::from_ref(&b)).unwrap_err().to_string();
         assert!(e.contains("expected bitt-eval-scene-1"), "{e}");
         let empty = scratch("empty");
+        write_json(&empty.join("config.json"), &plan(2)).unwrap();
         let e = merge(std::slice::from_ref(&empty)).unwrap_err().to_string();
         assert!(e.contains("no scene results"), "{e}");
         for d in [a, b, empty] {

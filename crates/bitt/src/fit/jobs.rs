@@ -38,48 +38,13 @@ pub struct KeypointSource {
     pub mirrored: bool,
 }
 
-/// The focal lengths `--intrinsics` may give, as multiples of the photo's long side: a
-/// fisheye-wide 0.05 to a telephoto 100. Outside, the fit's residuals are meaningless
-/// (infinite at 1e-30) rather than large (issue 38).
-pub const FOCAL_RANGE_OF_LONG_SIDE: [f64; 2] = [0.05, 100.0];
-
-/// Checks `--intrinsics` against the photo (`[w, h]` pixels): focal lengths within
-/// [`FOCAL_RANGE_OF_LONG_SIDE`], the principal point within the image widened by its own size
-/// on every side (a crop's principal point may lie off its centre, not a photo away).
+/// Checks `--intrinsics` against the photo (`[w, h]` pixels), as
+/// [`bitt_mesh::camera::check_intrinsics_for_image`].
 ///
 /// # Errors
 /// [`BittError::Invalid`] naming `--intrinsics`, the value and the allowed range.
-pub fn check_intrinsics_for_image(
-    [fx, fy, cx, cy]: [f64; 4],
-    [w, h]: [usize; 2],
-) -> Result<(), BittError> {
-    let (w, h) = (w as f64, h as f64);
-    let long = w.max(h);
-    let [lo, hi] = FOCAL_RANGE_OF_LONG_SIDE;
-    let bad = |why: String| {
-        Err(BittError::Invalid(format!(
-            "--intrinsics {fx},{fy},{cx},{cy}: {why} for the {w}x{h} photo"
-        )))
-    };
-    for (name, f) in [("fx", fx), ("fy", fy)] {
-        if !(lo * long..=hi * long).contains(&f) {
-            return bad(format!(
-                "{name} = {f} px is not between {} and {} px ({lo} to {hi} times the long side)",
-                lo * long,
-                hi * long
-            ));
-        }
-    }
-    if !(-w..=2.0 * w).contains(&cx) || !(-h..=2.0 * h).contains(&cy) {
-        return bad(format!(
-            "the principal point ({cx}, {cy}) is not within ({}, {}) to ({}, {})",
-            -w,
-            -h,
-            2.0 * w,
-            2.0 * h
-        ));
-    }
-    Ok(())
+pub fn check_intrinsics_for_image(k: [f64; 4], size: [usize; 2]) -> Result<(), BittError> {
+    bitt_mesh::camera::check_intrinsics_for_image(k, size).map_err(BittError::Invalid)
 }
 
 /// Where a photo's keypoints come from.
@@ -92,32 +57,12 @@ pub enum PhotoKeypoints<'a> {
     Detected(Box<PhotoDetection>),
 }
 
-/// `fx,fy,cx,cy` (pixels) as four positive-focal numbers.
+/// `fx,fy,cx,cy` (pixels), as [`bitt_mesh::camera::parse_intrinsics`].
 ///
 /// # Errors
-/// Not four finite numbers, or a focal length that is not positive.
+/// [`BittError::Invalid`]: not four finite numbers, or a focal length that is not positive.
 pub fn parse_intrinsics(text: &str) -> Result<[f64; 4], BittError> {
-    let values: Vec<&str> = text.split(',').map(str::trim).collect();
-    let bad = |why: String| {
-        BittError::Invalid(format!(
-            "--intrinsics {text:?}: {why} (expected fx,fy,cx,cy in pixels, e.g. 600,600,320,240)"
-        ))
-    };
-    if values.len() != 4 {
-        return Err(bad(format!("{} values", values.len())));
-    }
-    let mut out = [0.0; 4];
-    for (o, v) in out.iter_mut().zip(&values) {
-        *o = v
-            .parse::<f64>()
-            .ok()
-            .filter(|x| x.is_finite())
-            .ok_or_else(|| bad(format!("{v:?} is not a finite number")))?;
-    }
-    if out[0] <= 0.0 || out[1] <= 0.0 {
-        return Err(bad("the focal lengths must be positive".into()));
-    }
-    Ok(out)
+    bitt_mesh::camera::parse_intrinsics(text).map_err(BittError::Invalid)
 }
 
 /// A photo's keypoint fit.
