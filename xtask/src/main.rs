@@ -17,6 +17,9 @@
 //!   `convert-lpips --lin vgg.pth [--vgg vgg16-397923af.pth]`: LPIPS weights; forwarded.
 //! - `fuzz [TARGET|all] [--seconds N | --runs N]`: the cargo-fuzz targets of `fuzz/` (file
 //!   readers: pickles, torch checkpoints, MANO safetensors, annotations, InterHand, keypoints).
+//! - `kill-test [--times N] [--seed S] [--only CASE]`: SIGKILLs `bitt` at random moments
+//!   while `fit-hands`, `refine-hands`, `export` (glb, obj) and `eval` write, and checks that
+//!   each output is absent or whole and that a rerun completes (not in CI; `kill_test.rs`).
 //! - `nets [--preset P]`: the networks' parameter counts and output shapes (JSON).
 //! - `bench btr|albedo|nets [--preset P]`: burn vs PyTorch timings, side by side; `bench
 //!   render [--runs N]`: the renderer's stages on flex and wgpu (the `bench_render` example).
@@ -38,6 +41,7 @@ mod bench_render;
 mod check_clients;
 mod fuzz;
 mod gpu_bundle;
+mod kill_test;
 mod nets;
 mod scripts;
 mod slurm;
@@ -421,7 +425,7 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some((cmd, rest)) = args.split_first() else {
         bail!(
-            "usage: cargo xtask <demo|test|e2e|train-scene|render-avatar|export|eval|eval-merge|metrics|convert-lpips|detect-hands|convert-mediapipe|fit-hands|refine-hands|pose-hands|convert-mano|texture|convert-html|render|synth|fuzz|bench|gpu-bundle|gpu-check|check-clients|docs-images|mesh-noise-calibration|fuzz-seeds> [ARGS]"
+            "usage: cargo xtask <demo|test|e2e|train-scene|render-avatar|export|eval|eval-merge|metrics|convert-lpips|detect-hands|convert-mediapipe|fit-hands|refine-hands|pose-hands|convert-mano|texture|convert-html|render|synth|fuzz|kill-test|bench|gpu-bundle|gpu-check|check-clients|docs-images|mesh-noise-calibration|fuzz-seeds> [ARGS]"
         );
     };
     match cmd.as_str() {
@@ -453,6 +457,7 @@ fn main() -> Result<()> {
         }
         "e2e" => e2e(),
         "fuzz" => fuzz::fuzz(rest),
+        "kill-test" => kill_test::kill_test(rest),
         "gpu-bundle" => gpu_bundle::gpu_bundle().map(|_| ()),
         "gpu-check" => gpu_bundle::gpu_check(rest),
         "nets" => nets::nets(rest),
