@@ -182,7 +182,7 @@ pub fn keypoints(data: &[u8]) -> bool {
             2 => [1, 1],
             _ => [u32::MAX, 3],
         },
-        mirrored: sel & 16 != 0,
+        labels_as_is: sel & 16 != 0,
     };
     let path = Path::new("fuzz_keypoints.json");
     match parse_keypoints(file, path, &options) {

@@ -96,10 +96,16 @@ pub struct KeypointArgs {
     pub format: Option<FormatArg>,
     /// The photo is a mirrored selfie (as a front camera shows it): photo, keypoints and mask
     /// are flipped left-right before the fit, so each hand gets its own side's model.
-    /// Default: an ordinary photo. (MediaPipe names hands as if every image were mirrored;
-    /// its labels are read accordingly either way.)
+    /// Default: an ordinary photo. (MediaPipe's labels are read in each API's convention
+    /// either way; see --labels-as-is.)
     #[arg(long, requires = "keypoints")]
     pub mirrored: bool,
+    /// MediaPipe files: keep the hands' labels as the file gives them. By default the legacy
+    /// Solutions API's labels (`multi_handedness`) are swapped, since that API labels hands
+    /// as if every photo were a mirrored selfie, and the Tasks API's are kept (it labels each
+    /// hand as it appears). Use this when the labels in the file are already correct.
+    #[arg(long, requires = "keypoints")]
+    pub labels_as_is: bool,
     /// Camera intrinsics `fx,fy,cx,cy` in pixels of the photo, for the keypoint fit (of
     /// --keypoints, or of the hands detected in a photo given alone). Default: focal length =
     /// the image diagonal, principal point at the centre.
@@ -117,6 +123,7 @@ impl KeypointArgs {
             path: path.to_path_buf(),
             format: self.format.map(Into::into),
             mirrored: self.mirrored,
+            labels_as_is: self.labels_as_is,
         }
     }
 

@@ -169,6 +169,7 @@ fn request(args: &TrainSceneArgs) -> Result<FreshRequest<'_>> {
     let keypoint_file_only = [
         ("--format", args.keypoint.format.is_some()),
         ("--mirrored", args.keypoint.mirrored),
+        ("--labels-as-is", args.keypoint.labels_as_is),
     ];
     let fit_only = [("--intrinsics", args.keypoint.intrinsics.is_some())];
     let ignored: Vec<&str> = keypoint_file_only
@@ -183,7 +184,7 @@ fn request(args: &TrainSceneArgs) -> Result<FreshRequest<'_>> {
         .collect();
     if !ignored.is_empty() {
         bail!(
-            "{} {} not apply here: --format and --mirrored describe a --keypoints file, \
+            "{} {} not apply here: --format, --mirrored and --labels-as-is describe a --keypoints file, \
              --intrinsics the camera of a keypoint fit (--keypoints, or --image alone); an \
              annotation or a scene brings its own camera",
             ignored.join(", "),

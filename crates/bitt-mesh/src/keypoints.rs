@@ -359,15 +359,17 @@ pub struct KeypointOptions {
     /// (`x < -width`, `x > 2 * width`, same for `y`): such a file is not in pixels of this
     /// image. `[0, 0]` (the default) means unknown: no bounds check, MediaPipe refused.
     pub image_size: [u32; 2],
-    /// MediaPipe only: take the handedness labels as they are. MediaPipe labels hands
-    /// assuming a mirrored selfie image, so a hand it calls "Left" appears as a *right* hand
-    /// in the image it ran on. With `false` (the default: an ordinary photo, MediaPipe run on
-    /// it) the labels are swapped and a note says so. With `true` the hand labelled "Left" is
-    /// taken as the left hand: right when the labels already describe the hands as they appear
-    /// in the image the coordinates refer to (e.g. the application flipped the image for
-    /// MediaPipe and flipped the landmarks back, or swapped the labels itself). Nothing is
-    /// flipped here; see [`TwoHandKeypoints::mirrored`] for that.
-    pub mirrored: bool,
+    /// MediaPipe only: take the handedness labels as they are, whatever the layout. By
+    /// default (`false`, an ordinary photo that MediaPipe ran on) each layout is read in its
+    /// API's convention, measured with genuine MediaPipe 0.10.21 (`tests-data/mediapipe/`):
+    /// the legacy Solutions API (`multi_handedness`) labels hands as if the image were a
+    /// mirrored selfie, so a hand it calls "Left" appears as a *right* hand and its labels are
+    /// swapped; the Tasks API (`handedness` with `hand_landmarks` or `landmarks`) labels each
+    /// hand as it appears in the image, so its labels are kept. A note says which. With
+    /// `true` the labels are kept in every layout: right when the application already swapped
+    /// the legacy labels itself, or flipped the image for MediaPipe and flipped the landmarks
+    /// back. Nothing is flipped here; see [`TwoHandKeypoints::mirrored`] for that.
+    pub labels_as_is: bool,
 }
 
 /// Guesses the format of a parsed file from its keys: a `people` key is OpenPose;
@@ -426,7 +428,7 @@ fn parse(bytes: &[u8], options: &KeypointOptions) -> Result<TwoHandKeypoints, St
     let bounds = Bounds::new(options.image_size);
     let read = match format {
         KeypointFormat::OpenPose => read_openpose(&value, &bounds),
-        KeypointFormat::MediaPipe => read_mediapipe(&value, &bounds, options.mirrored),
+        KeypointFormat::MediaPipe => read_mediapipe(&value, &bounds, options.labels_as_is),
         KeypointFormat::Plain => read_plain(&value, &bounds),
     };
     let (left, right, mut notes) = read.map_err(|detail| match guessed {
@@ -758,7 +760,7 @@ fn openpose_hand(v: &Value, field: &str, bounds: &Bounds) -> Result<Option<Vec<K
 // ---------------------------------------------------------------------------------------
 // MediaPipe
 
-fn read_mediapipe(value: &Value, bounds: &Bounds, mirrored: bool) -> Result<Hands, String> {
+fn read_mediapipe(value: &Value, bounds: &Bounds, labels_as_is: bool) -> Result<Hands, String> {
     const EXPECTED: &str = "MediaPipe handedness + hand_landmarks (Python), landmarks \
         (JavaScript) or multi_hand_landmarks (legacy Solutions)";
     let obj = root(value, EXPECTED)?;
@@ -768,6 +770,11 @@ fn read_mediapipe(value: &Value, bounds: &Bounds, mirrored: bool) -> Result<Hand
     let hd_key = find(MEDIAPIPE_HANDEDNESS_KEYS).ok_or_else(|| {
         format!("handedness: missing (expected {EXPECTED}); it tells the hands apart")
     })?;
+    // The legacy Solutions API labels as for a mirrored selfie; the Tasks APIs as the hand
+    // appears in the image (measured with genuine MediaPipe 0.10.21: the two APIs gave
+    // opposite labels to 9 of the 10 hands both found; docs/keypoints.md).
+    let legacy = lm_key == "multi_hand_landmarks" || hd_key == "multi_handedness";
+    let swap = legacy && !labels_as_is;
     let empty = Vec::new();
     // The legacy API's results hold `None` (null) when no hand was found.
     let list = |key: &str| match &obj[key] {
@@ -813,24 +820,25 @@ fn read_mediapipe(value: &Value, bounds: &Bounds, mirrored: bool) -> Result<Hand
              hands overlap: fix one label or use the plain format"
         ));
     }
-    let mut notes = Vec::new();
-    if mirrored {
-        notes.push(
-            "MediaPipe labels taken as they are (mirrored): the hand labelled Left is the left \
-             hand"
-                .to_owned(),
-        );
-    } else {
-        notes.push(
-            "MediaPipe labels swapped (image not mirrored): the hand labelled Left is fitted \
-             as the right hand and vice versa; set mirrored (--mirrored) to take the labels as \
-             they are"
-                .to_owned(),
-        );
-    }
+    let api = if legacy { "legacy Solutions" } else { "Tasks" };
+    let note = match (swap, labels_as_is) {
+        (true, _) => format!(
+            "MediaPipe {api} labels swapped: that API labels hands as if the photo were a \
+             mirrored selfie, so the hand labelled Left is fitted as the right hand and vice \
+             versa (--labels-as-is keeps them)"
+        ),
+        (false, true) => {
+            format!("MediaPipe {api} labels taken as they are (--labels-as-is)")
+        }
+        (false, false) => format!(
+            "MediaPipe {api} labels taken as they are: that API labels each hand as it appears \
+             in the photo"
+        ),
+    };
+    let notes = vec![note];
     let (mut left, mut right) = (None, None);
     for (label, points) in read {
-        let side = if mirrored { label } else { label.mirrored() };
+        let side = if swap { label.mirrored() } else { label };
         *match side {
             Side::Left => &mut left,
             Side::Right => &mut right,
@@ -997,7 +1005,7 @@ mod tests {
         KeypointOptions {
             format,
             image_size: [W, H],
-            mirrored: false,
+            labels_as_is: false,
         }
     }
 
@@ -1157,11 +1165,12 @@ mod tests {
         )
     }
 
-    /// MediaPipe labels the geometric left hand "Right" (it assumes a mirrored image).
-    fn mediapipe_label_of(side: Side) -> &'static str {
-        match side {
-            Side::Left => "Right",
-            Side::Right => "Left",
+    /// The label MediaPipe gives the geometric `side`: the Tasks APIs name the hand as it
+    /// appears; the legacy Solutions API assumes a mirrored image and names the other side.
+    fn mediapipe_label_of(side: Side, legacy: bool) -> &'static str {
+        match (side, legacy) {
+            (Side::Left, false) | (Side::Right, true) => "Left",
+            (Side::Right, false) | (Side::Left, true) => "Right",
         }
     }
 
@@ -1172,7 +1181,7 @@ mod tests {
         let mut landmarks = Vec::new();
         let mut world = Vec::new();
         for (i, side) in [Side::Right, Side::Left].into_iter().enumerate() {
-            let label = mediapipe_label_of(side);
+            let label = mediapipe_label_of(side, false);
             handedness.push(format!(
                 "[{{\"index\": {i}, \"score\": 0.9{i}78, \"display_name\": \"\", \
                  \"category_name\": \"{label}\"}}]"
@@ -1222,7 +1231,7 @@ mod tests {
         let mut landmarks = Vec::new();
         let mut world = Vec::new();
         for (i, side) in [Side::Left, Side::Right].into_iter().enumerate() {
-            let label = mediapipe_label_of(side);
+            let label = mediapipe_label_of(side, false);
             handedness.push(format!(
                 "[{{\"score\":0.97{i},\"index\":{i},\"categoryName\":\"{label}\",\
                  \"displayName\":\"{label}\"}}]"
@@ -1274,7 +1283,7 @@ mod tests {
         for (i, side) in [Side::Left, Side::Right].into_iter().enumerate() {
             handedness.push(format!(
                 "{{\"classification\": [{{\"index\": {i}, \"score\": 0.95, \"label\": \"{}\"}}]}}",
-                mediapipe_label_of(side)
+                mediapipe_label_of(side, true)
             ));
             let lms: Vec<String> = truth(side)
                 .iter()
@@ -1412,12 +1421,12 @@ mod tests {
                     .iter()
                     .all(|p| p.confidence == 1.0)
             );
-            assert!(
-                k.notes
-                    .iter()
-                    .any(|n| n.contains("MediaPipe labels swapped")),
-                "{name}"
-            );
+            let expected = if name == "legacy" {
+                "MediaPipe legacy Solutions labels swapped"
+            } else {
+                "MediaPipe Tasks labels taken as they are"
+            };
+            assert!(k.notes.iter().any(|n| n.contains(expected)), "{name}");
             assert_eq!(k.num_present(Side::Right), 21);
         }
 
@@ -1449,17 +1458,76 @@ mod tests {
         }
     }
 
+    /// `labels_as_is` keeps the legacy API's labels (not swapped) and changes nothing for the
+    /// Tasks APIs, whose labels are already the hands as they appear.
     #[test]
-    fn mediapipe_mirrored_takes_labels_as_they_are() {
+    fn mediapipe_labels_as_is_skips_the_legacy_swap() {
         let opts = KeypointOptions {
-            mirrored: true,
+            labels_as_is: true,
             ..options(None)
         };
-        let swapped = read_ok(&mediapipe_python_fixture(), &options(None));
-        let as_is = read_ok(&mediapipe_python_fixture(), &opts);
+        let swapped = read_ok(&mediapipe_legacy_fixture(), &options(None));
+        let as_is = read_ok(&mediapipe_legacy_fixture(), &opts);
         assert_eq!(as_is.left, swapped.right);
         assert_eq!(as_is.right, swapped.left);
-        assert!(as_is.notes.iter().any(|n| n.contains("as they are")));
+        assert!(
+            swapped
+                .notes
+                .iter()
+                .any(|n| n.contains("legacy Solutions labels swapped"))
+        );
+        assert!(as_is.notes.iter().any(|n| n.contains("(--labels-as-is)")));
+        let tasks = read_ok(&mediapipe_python_fixture(), &options(None));
+        assert_eq!(read_ok(&mediapipe_python_fixture(), &opts).left, tasks.left);
+        assert!(
+            tasks
+                .notes
+                .iter()
+                .any(|n| n.contains("Tasks labels taken as they are"))
+        );
+    }
+
+    /// Genuine MediaPipe 0.10.21 output (`tests-data/mediapipe/dump_mediapipe.py`) on two
+    /// synthetic photos of `bitt synth`, in both APIs' layouts: read by default, every hand
+    /// lands on its true side (the scenes' true wrists, from their `scene.json`, within 30 px).
+    /// The two APIs give opposite labels to the same hand.
+    #[test]
+    fn genuine_mediapipe_layouts_give_the_true_sides() {
+        let opts = KeypointOptions {
+            image_size: [256, 256],
+            ..options(None)
+        };
+        let cases: [(&str, [Option<[f64; 2]>; 2]); 4] = [
+            (
+                include_str!("../tests-data/mediapipe/synth000_tasks.json"),
+                [None, Some([127.6, 59.7])],
+            ),
+            (
+                include_str!("../tests-data/mediapipe/synth000_legacy.json"),
+                [None, Some([127.6, 59.7])],
+            ),
+            (
+                include_str!("../tests-data/mediapipe/synth005_tasks.json"),
+                [Some([204.5, 101.4]), Some([155.3, 56.5])],
+            ),
+            (
+                include_str!("../tests-data/mediapipe/synth005_legacy.json"),
+                [None, Some([155.3, 56.5])],
+            ),
+        ];
+        for (i, (text, wrists)) in cases.iter().enumerate() {
+            let k = read_ok(text, &opts);
+            for (side, wrist) in Side::BOTH.into_iter().zip(wrists) {
+                match (k.hand(side), wrist) {
+                    (None, None) => {}
+                    (Some(p), Some([x, y])) => {
+                        let d = (p[0].x - x).hypot(p[0].y - y);
+                        assert!(d < 30.0, "case {i} {side}: wrist {d:.1} px off");
+                    }
+                    (got, want) => panic!("case {i} {side}: {got:?} vs {want:?}"),
+                }
+            }
+        }
     }
 
     #[test]
@@ -1468,22 +1536,22 @@ mod tests {
             "hand_landmarks": [[LMS]], "hand_world_landmarks": [[]]}"#;
         let lms = vec![r#"{"x": 0.5, "y": 0.25, "z": 0.0}"#; 21].join(", ");
         let k = read_ok(&one.replace("LMS", &lms), &options(None));
-        assert!(k.left.is_none());
+        assert!(k.right.is_none());
         assert_eq!(
-            k.hand(Side::Right).unwrap()[0],
+            k.hand(Side::Left).unwrap()[0],
             Keypoint {
                 x: 319.5,
                 y: 119.5,
                 confidence: 1.0
             }
         );
-        assert!(k.notes.iter().any(|n| n == "no left hand in the file"));
+        assert!(k.notes.iter().any(|n| n == "no right hand in the file"));
         // A label only in display_name is used.
         let display = one.replace("LMS", &lms).replace(
             r#""display_name": "", "category_name": "Left""#,
             r#""display_name": "Right", "category_name": """#,
         );
-        assert!(read_ok(&display, &options(None)).right.is_none());
+        assert!(read_ok(&display, &options(None)).left.is_none());
         // No hand at all.
         let none = r#"{"handedness": [], "hand_landmarks": [], "hand_world_landmarks": []}"#;
         error(none.as_bytes(), &options(None), &["no hand in the file"]);
@@ -1724,7 +1792,7 @@ mod tests {
         error(
             odd.as_bytes(),
             &options(None),
-            &["handedness[1][0].category_name: \"Up\", expected Left or Right"],
+            &["handedness[0][0].category_name: \"Up\", expected Left or Right"],
         );
 
         // Negative confidence, points far outside the image.
@@ -1865,7 +1933,7 @@ mod tests {
             options(None),
             KeypointOptions::default(),
             KeypointOptions {
-                mirrored: true,
+                labels_as_is: true,
                 ..options(Some(KeypointFormat::MediaPipe))
             },
         ];

@@ -198,7 +198,7 @@ fn write_read_round_trip_is_exact_and_errors_name_the_file() {
     let options = bitt_mesh::keypoints::KeypointOptions {
         format: None,
         image_size: [cfg.size, cfg.size],
-        mirrored: false,
+        labels_as_is: false,
     };
     let read = bitt_mesh::keypoints::parse_keypoints(
         kp.to_string().as_bytes(),

@@ -621,7 +621,7 @@ mod tests {
             &bitt_mesh::keypoints::KeypointOptions {
                 format: None,
                 image_size: [100, 80],
-                mirrored: false,
+                labels_as_is: false,
             },
         )
         .unwrap();

@@ -454,7 +454,7 @@ fn fit_synthetic(
     let options = KeypointOptions {
         format: keypoints.source.format,
         image_size: [truth.width, truth.height],
-        mirrored: false,
+        labels_as_is: keypoints.source.labels_as_is,
     };
     let points = read_keypoints(path, &options)?;
     let camera = match keypoints.intrinsics()? {

@@ -36,6 +36,9 @@ pub struct KeypointSource {
     /// The photo is a mirrored selfie: it is un-mirrored (flipped left-right) before the
     /// fit, with its keypoints and mask, so that each hand gets its own side's model.
     pub mirrored: bool,
+    /// MediaPipe: keep the file's labels whatever its layout
+    /// ([`KeypointOptions::labels_as_is`]).
+    pub labels_as_is: bool,
 }
 
 /// Checks `--intrinsics` against the photo (`[w, h]` pixels), as
@@ -198,7 +201,7 @@ pub fn fit_photo(
             let options = KeypointOptions {
                 format: source.format,
                 image_size: [w as u32, h as u32],
-                mirrored: false,
+                labels_as_is: source.labels_as_is,
             };
             let points = read_keypoints(&source.path, &options)?;
             (photo.data, [h, w], points, source.mirrored, None)

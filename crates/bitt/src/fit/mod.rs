@@ -1380,8 +1380,8 @@ mod tests {
                 "hand_right_keypoints_3d": []
             }]
         });
-        // MediaPipe: normalised from the image's edges; its label is the opposite of the hand
-        // the image shows (it assumes a mirrored selfie).
+        // MediaPipe's Tasks API: normalised from the image's edges; its label names the hand
+        // as the image shows it.
         let landmarks = |side: Side| -> Vec<serde_json::Value> {
             kp.hand(side)
                 .unwrap()
@@ -1397,7 +1397,7 @@ mod tests {
                 [{"index": 1, "score": 0.97, "display_name": "Right", "category_name": "Right"}],
                 [{"index": 0, "score": 0.95, "display_name": "Left", "category_name": "Left"}]
             ],
-            "hand_landmarks": [landmarks(Side::Left), landmarks(Side::Right)],
+            "hand_landmarks": [landmarks(Side::Right), landmarks(Side::Left)],
             "hand_world_landmarks": [[], []]
         });
         let js = serde_json::json!({
@@ -1405,7 +1405,7 @@ mod tests {
                 [{"score": 0.95, "index": 0, "categoryName": "Left", "displayName": "Left"}],
                 [{"score": 0.97, "index": 1, "categoryName": "Right", "displayName": "Right"}]
             ],
-            "landmarks": [landmarks(Side::Right), landmarks(Side::Left)],
+            "landmarks": [landmarks(Side::Left), landmarks(Side::Right)],
             "worldLandmarks": [[], []]
         });
         let files = [
@@ -1440,7 +1440,7 @@ mod tests {
         let options = bitt_mesh::keypoints::KeypointOptions {
             format: None,
             image_size: [256, 256],
-            mirrored: false,
+            labels_as_is: false,
         };
         let mut fits = Vec::new();
         for path in keypoint_files(&keypoints, &dir) {
