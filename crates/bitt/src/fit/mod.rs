@@ -1073,16 +1073,16 @@ fn check_fitted_hand(
              pixels (see --format) and the intrinsics the photo's?"
         )));
     }
-    if let Some(span) = span_px {
-        if residual_px > MAX_RESIDUAL_OF_SPAN * span {
-            return Err(BittError::Invalid(format!(
-                "the {side} hand's keypoints fit no hand: the fitted hand misses them by \
-                 {residual_px:.1} px on average, {:.0}% of the {span:.0} px they span (at most \
-                 {:.0}%); check that they are a hand's 21 points in OpenPose order",
-                100.0 * residual_px / span,
-                100.0 * MAX_RESIDUAL_OF_SPAN
-            )));
-        }
+    if let Some(span) = span_px
+        && residual_px > MAX_RESIDUAL_OF_SPAN * span
+    {
+        return Err(BittError::Invalid(format!(
+            "the {side} hand's keypoints fit no hand: the fitted hand misses them by \
+             {residual_px:.1} px on average, {:.0}% of the {span:.0} px they span (at most \
+             {:.0}%); check that they are a hand's 21 points in OpenPose order",
+            100.0 * residual_px / span,
+            100.0 * MAX_RESIDUAL_OF_SPAN
+        )));
     }
     Ok(())
 }
