@@ -13,6 +13,7 @@ use bitt_mesh::camera::{check_intrinsics_for_image, parse_intrinsics, parse_orbi
 use bitt_mesh::glam::DVec3;
 use bitt_mesh::interhand::{InterHandDataset, InterHandPaths, InterHandSelection};
 use bitt_mesh::keypoints::{KeypointFormat, KeypointOptions, parse_keypoints};
+use bitt_mesh::light::{LightValues, parse_light};
 use bitt_mesh::mano::{from_safetensors, to_safetensors};
 use bitt_mesh::model::{MANO_PARENTS, NUM_BETAS, NUM_JOINTS, NUM_POSE, NUM_POSE_FEATURES};
 use bitt_mesh::{HandModel, HandPair, HandParams, PinholeCamera, Side};
@@ -241,6 +242,28 @@ pub fn camera_values(data: &[u8]) -> bool {
         }
         Err(e) => {
             assert!(e.starts_with("--intrinsics "), "{e}");
+            false
+        }
+    }
+}
+
+/// The `--light` text (bitt-mesh `light::parse_light`): any input gives a light whose values
+/// are finite and whose colours are not negative and not all 0, or an error naming the source.
+pub fn light(data: &[u8]) -> bool {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return false;
+    };
+    match parse_light(text, "--light") {
+        Ok(l) => {
+            assert!(l.check_finite().is_ok(), "{l:?}");
+            let colours = [l.ambient, l.diffuse, l.specular];
+            assert!(colours.iter().flatten().all(|&x| x >= 0.0), "{l:?}");
+            assert!(colours.iter().flatten().any(|&x| x > 0.0), "{l:?}");
+            assert_eq!(LightValues::from_array(l.to_array()), l);
+            true
+        }
+        Err(e) => {
+            assert!(e.starts_with("--light: "), "{e}");
             false
         }
     }

@@ -268,6 +268,9 @@ pub fn seeds() -> Vec<(&'static str, String, Vec<u8>)> {
         let bytes = [vec![sel], text.as_bytes().to_vec()].concat();
         out.push(("camera_values", format!("seed_{name}.txt"), bytes));
     }
+    // The --light text.
+    let light = r#"{"ambient": [0.5, 0.5, 0.5], "diffuse": [0.3, 0.3, 0.3], "specular": [0.2, 0.2, 0.2], "location": [0, -1, 0]}"#;
+    out.push(("light", "seed_light.json".into(), light.as_bytes().to_vec()));
     out
 }
 

@@ -60,6 +60,11 @@ fn camera_values_corpus_replays() {
 }
 
 #[test]
+fn light_corpus_replays() {
+    replay("light", checks::light);
+}
+
+#[test]
 fn interhand_corpus_replays() {
     replay("interhand", checks::interhand);
 }
@@ -80,6 +85,8 @@ fn fuzz_seeds_read() {
             "annotation" => checks::annotation(&bytes),
             "interhand" => checks::interhand(&bytes),
             "keypoints" => checks::keypoints(&bytes),
+            "camera_values" => checks::camera_values(&bytes),
+            "light" => checks::light(&bytes),
             other => panic!("unknown target {other}"),
         };
         assert!(ok, "{target}: seed {name} does not read");

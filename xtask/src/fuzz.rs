@@ -12,7 +12,7 @@ use anyhow::{Context, Result, bail};
 use crate::{check, root};
 
 /// Every target with its `-max_len` (a little above its largest seed).
-const TARGETS: [(&str, usize, &str); 7] = [
+const TARGETS: [(&str, usize, &str); 8] = [
     ("from_bytes", 4096, "pickles (bitt-pickle from_bytes)"),
     (
         "torch",
@@ -46,11 +46,12 @@ const TARGETS: [(&str, usize, &str); 7] = [
         "--intrinsics and --view (bitt-mesh camera::parse_intrinsics, \
          check_intrinsics_for_image, parse_orbit_view)",
     ),
+    ("light", 512, "--light text (bitt-mesh light::parse_light)"),
 ];
 
 const USAGE: &str = "usage: cargo xtask fuzz [TARGET|all] [--seconds N | --runs N] \
                      (TARGET: from_bytes, torch, mano_safetensors, annotation, interhand, \
-                     keypoints, camera_values; default: all, 60 seconds each)";
+                     keypoints, camera_values, light; default: all, 60 seconds each)";
 
 /// How long each target runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -8,6 +8,7 @@
 //! - [`annotation`]: BiTT/InterHand annotation pickles and InterHand2.6M JSON.
 //! - [`interhand`]: the InterHand2.6M dataset reader and the paper's scene selection.
 //! - [`keypoints`]: 2D hand keypoints from OpenPose, MediaPipe and a plain JSON format.
+//! - [`light`]: the scene light's 12 values and the `--light` text.
 //! - [`export`]: OBJ and glTF 2.0 binary writers.
 //!
 //! This crate knows nothing of tensors, networks or textures beyond a UV layout, and never
@@ -20,6 +21,7 @@ pub mod export;
 pub mod interhand;
 pub mod keypoints;
 pub mod lbs;
+pub mod light;
 pub mod mano;
 pub mod model;
 pub mod procedural;

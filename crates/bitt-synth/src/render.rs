@@ -7,6 +7,8 @@
 //! specular 0; antialiasing on; black background) and the view's light, whose location is in
 //! the **camera frame**. The image is then clamped to `[0, 1]`.
 
+use bitt_render::scene::LightValuesExt;
+
 use bitt_mesh::glam::{DMat3, DVec3};
 use bitt_mesh::{HandModel, HandPair, PinholeCamera, Side, TwoHandScene, UvLayout};
 use bitt_render::scene::{

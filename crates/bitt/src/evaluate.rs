@@ -1,6 +1,8 @@
 //! Rendering a trained avatar at other views, poses and lights, and measuring it against
 //! ground truth (synthetic scenes).
 
+use bitt_render::scene::LightValuesExt;
+
 use bitt_mesh::glam::DVec3;
 use bitt_mesh::{PinholeCamera, TwoHandScene};
 use bitt_render::scene::{LightValues, PointLight};

@@ -4,6 +4,8 @@
 //! views around the hands with an unwrap row. Everything is made in memory before the first
 //! file is written ([`write_figure`]: each one atomically, next to the main one).
 
+use bitt_render::scene::LightValuesExt;
+
 use std::path::{Path, PathBuf};
 
 use bitt_mesh::glam::{DMat3, DVec3};

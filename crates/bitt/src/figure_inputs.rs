@@ -137,32 +137,7 @@ pub fn read_light(arg: &str) -> Result<LightValues, BittError> {
             .context_with(|| format!("--light: cannot read light file {arg}"))?;
         (text, arg.to_string())
     };
-    let light: LightValues = serde_json::from_str(&text).context_with(|| {
-        format!(
-            "{source}: expected JSON {{\"ambient\": [r, g, b], \"diffuse\": [r, g, b], \
-             \"specular\": [r, g, b], \"location\": [x, y, z]}}"
-        )
-    })?;
-    light.validate().map_err(|e| {
-        BittError::Invalid(format!("{source}: {e} (every light value must be finite)"))
-    })?;
-    // Light adds to the image: a negative colour, or none at all, renders black (issue 38).
-    let colours = [
-        ("ambient", light.ambient),
-        ("diffuse", light.diffuse),
-        ("specular", light.specular),
-    ];
-    if let Some((name, part)) = colours.iter().find(|(_, p)| p.iter().any(|&x| x < 0.0)) {
-        return Err(BittError::Invalid(format!(
-            "{source}: {name} is {part:?}; a light's colours are 0 or more"
-        )));
-    }
-    if colours.iter().all(|(_, p)| p.iter().all(|&x| x == 0.0)) {
-        return Err(BittError::Invalid(format!(
-            "{source}: ambient, diffuse and specular are all 0: that light renders black"
-        )));
-    }
-    Ok(light)
+    bitt_mesh::light::parse_light(&text, &source).map_err(BittError::Invalid)
 }
 
 /// Both hands' UV layouts, `[left, right]`: HTML's UV file (`uvs_left` for the left hand

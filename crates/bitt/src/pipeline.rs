@@ -1,6 +1,8 @@
 //! The BiTT forward pass (paper Fig. 2, Sec. 3.1-3.3): scene estimation, coarse stage and fine
 //! stage on one training view, with every image the losses need.
 
+use bitt_render::scene::LightValuesExt;
+
 use bitt_nets::{BittNets, LightParams, compose_texels};
 use bitt_render::scene::{PointLight, RenderSettings, UnwrapPlan, UnwrapSettings};
 use bitt_texture::{LayoutGather, TexturePcaTensors};

@@ -1,6 +1,8 @@
 //! A whole per-scene run: prepare the trainer from a synthetic scene, train (resumably),
 //! evaluate against ground truth, and write the run folder.
 
+use bitt_render::scene::LightValuesExt;
+
 use std::path::{Path, PathBuf};
 
 use bitt_mesh::glam::{DMat3, DVec3};

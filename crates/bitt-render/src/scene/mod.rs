@@ -13,7 +13,7 @@ mod unwrap;
 
 pub use camera::{Camera, DepthRange};
 pub use geometry::{GeometryPath, SceneGeometry};
-pub use shading::{LightValues, Material, PointLight, phong, vertex_normals};
+pub use shading::{LightValues, LightValuesExt, Material, PointLight, phong, vertex_normals};
 pub use unwrap::{
     TexelSurface, TexelVisibilityStats, UnwrapPlan, UnwrapSettings, Unwrapped, unwrap,
 };

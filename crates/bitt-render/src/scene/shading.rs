@@ -20,77 +20,26 @@ pub struct PointLight {
     pub location: Tensor<1>,
 }
 
-/// The 12 numbers of the paper's light parameterisation (section 3.1), in its order:
-/// ambient colour, diffuse colour, specular colour, location.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct LightValues {
-    /// Ambient colour (RGB).
-    pub ambient: [f32; 3],
-    /// Diffuse colour (RGB).
-    pub diffuse: [f32; 3],
-    /// Specular colour (RGB).
-    pub specular: [f32; 3],
-    /// Location (world coordinates).
-    pub location: [f32; 3],
-}
+pub use bitt_mesh::light::LightValues;
 
-impl Default for LightValues {
-    /// The reference renderer's default light (`build_light`): ambient 0.5, diffuse 0.1,
-    /// specular 0.3, at (0, 1, 0).
-    fn default() -> Self {
-        Self {
-            ambient: [0.5; 3],
-            diffuse: [0.1; 3],
-            specular: [0.3; 3],
-            location: [0.0, 1.0, 0.0],
-        }
-    }
-}
-
-impl LightValues {
-    /// From the 12-number vector (ambient, diffuse, specular, location).
-    pub fn from_array(v: [f32; 12]) -> Self {
-        let part = |i: usize| [v[3 * i], v[3 * i + 1], v[3 * i + 2]];
-        Self {
-            ambient: part(0),
-            diffuse: part(1),
-            specular: part(2),
-            location: part(3),
-        }
-    }
-
-    /// The 12-number vector (ambient, diffuse, specular, location).
-    pub fn to_array(&self) -> [f32; 12] {
-        let mut out = [0.0; 12];
-        for (i, part) in [self.ambient, self.diffuse, self.specular, self.location]
-            .iter()
-            .enumerate()
-        {
-            out[3 * i..3 * i + 3].copy_from_slice(part);
-        }
-        out
-    }
-
+/// The renderer's side of [`LightValues`]: its check as a [`RenderError`] and its tensors.
+pub trait LightValuesExt {
     /// Checks that every value is finite.
     ///
     /// # Errors
     /// [`RenderError::BadLight`] naming the first non-finite part.
-    pub fn validate(&self) -> Result<(), RenderError> {
-        for (name, part) in [
-            ("ambient", self.ambient),
-            ("diffuse", self.diffuse),
-            ("specular", self.specular),
-            ("location", self.location),
-        ] {
-            if part.iter().any(|x| !x.is_finite()) {
-                return Err(RenderError::BadLight(format!("{name} is {part:?}")));
-            }
-        }
-        Ok(())
-    }
+    fn validate(&self) -> Result<(), RenderError>;
 
     /// The light as tensors on `device`.
-    pub fn to_light(&self, device: &burn::tensor::Device) -> PointLight {
+    fn to_light(&self, device: &burn::tensor::Device) -> PointLight;
+}
+
+impl LightValuesExt for LightValues {
+    fn validate(&self) -> Result<(), RenderError> {
+        self.check_finite().map_err(RenderError::BadLight)
+    }
+
+    fn to_light(&self, device: &burn::tensor::Device) -> PointLight {
         let t = |v: [f32; 3]| float_tensor(v.to_vec(), [3], device);
         PointLight {
             ambient: t(self.ambient),

@@ -1,6 +1,8 @@
 //! The scene layer: projection, Phong shading against an independent implementation, two
 //! procedural hands in one depth test, unwrapping and texel statistics.
 
+use crate::scene::LightValuesExt;
+
 use bitt_mesh::glam::{DMat3, DVec3};
 use bitt_mesh::lbs::{HandParams, HandPose};
 use bitt_mesh::model::{NUM_BETAS, NUM_POSE};

@@ -1,5 +1,7 @@
 //! Running the methods on one scene: each trained on the input view, then scored.
 
+use bitt_render::scene::LightValuesExt;
+
 use std::collections::BTreeMap;
 use std::time::Instant;
 

@@ -1,5 +1,7 @@
 //! A saved real avatar read back from its folder, and textures rendered on any hands.
 
+use bitt_render::scene::LightValuesExt;
+
 use std::path::Path;
 
 use bitt_mesh::{PinholeCamera, TwoHandScene};

@@ -1,5 +1,7 @@
 //! Scores of a trained real avatar at novel views and poses against the photographs.
 
+use bitt_render::scene::LightValuesExt;
+
 use bitt_mesh::TwoHandScene;
 use bitt_render::scene::{LightValues, RenderSettings};
 use burn::tensor::Tensor;

@@ -23,6 +23,8 @@
 
 mod jobs;
 
+use bitt_render::scene::LightValuesExt;
+
 use std::time::Instant;
 
 use bitt_mesh::glam::DVec3;
