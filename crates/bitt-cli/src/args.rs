@@ -140,3 +140,38 @@ impl KeypointArgs {
         Ok(bitt::config_files::fit_config(self.fit_config.as_deref())?)
     }
 }
+
+/// The default `--cache`: `$XDG_CACHE_HOME/bitt`, else `$HOME/.cache/bitt` (the XDG base
+/// directory rule), else `runs/cache` when neither is set. Never the current directory when
+/// the user has a home: a run with `--out` elsewhere leaves nothing behind there.
+pub fn default_cache_dir() -> PathBuf {
+    let non_empty = |k: &str| {
+        std::env::var_os(k)
+            .filter(|v| !v.is_empty())
+            .map(PathBuf::from)
+    };
+    non_empty("XDG_CACHE_HOME")
+        .filter(|p| p.is_absolute())
+        .or_else(|| non_empty("HOME").map(|h| h.join(".cache")))
+        .map_or_else(|| PathBuf::from("runs/cache"), |c| c.join("bitt"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The cache is the user's cache folder, not the current one (issue 37).
+    #[test]
+    fn the_default_cache_is_the_users_cache_folder() {
+        let dir = default_cache_dir();
+        if std::env::var_os("HOME").is_some_and(|h| !h.is_empty()) {
+            assert!(
+                dir.is_absolute() && dir.ends_with("bitt"),
+                "{}",
+                dir.display()
+            );
+        } else {
+            assert_eq!(dir, PathBuf::from("runs/cache"));
+        }
+    }
+}

@@ -83,8 +83,9 @@ pub struct EvalArgs {
     /// skipped on rerun), `sheets/`, `results.json`, `results.md`.
     #[arg(long, default_value = "runs/eval")]
     pub out: PathBuf,
-    /// Cache of generated scenes and fitted texture PCAs.
-    #[arg(long, default_value = "runs/cache")]
+    /// Cache of generated scenes and fitted texture PCAs (default: `$XDG_CACHE_HOME/bitt`,
+    /// else `~/.cache/bitt`; never the current folder).
+    #[arg(long, default_value_os_t = crate::args::default_cache_dir())]
     pub cache: PathBuf,
     /// LPIPS-VGG weights (safetensors from `bitt convert-lpips`). Default:
     /// $BITT_LPIPS_WEIGHTS, else ~/.cache/bitt/lpips_vgg.safetensors when it exists; without

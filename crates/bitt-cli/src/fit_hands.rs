@@ -73,8 +73,9 @@ pub struct FitHandsArgs {
     /// Output folder.
     #[arg(long, default_value = "runs/fit-hands")]
     pub out: PathBuf,
-    /// Cache folder for the fitted texture PCA (the refinement).
-    #[arg(long, default_value = "runs/cache")]
+    /// Cache folder for the fitted texture PCA (the refinement) (default: `$XDG_CACHE_HOME/bitt`, else
+    /// `~/.cache/bitt`; never the current folder).
+    #[arg(long, default_value_os_t = crate::args::default_cache_dir())]
     pub cache: PathBuf,
 }
 

@@ -55,8 +55,9 @@ pub struct RefineHandsArgs {
     /// Output folder.
     #[arg(long, default_value = "runs/refine-hands")]
     pub out: PathBuf,
-    /// Cache folder for the fitted texture PCA.
-    #[arg(long, default_value = "runs/cache")]
+    /// Cache folder for the fitted texture PCA (default: `$XDG_CACHE_HOME/bitt`, else
+    /// `~/.cache/bitt`; never the current folder).
+    #[arg(long, default_value_os_t = crate::args::default_cache_dir())]
     pub cache: PathBuf,
 }
 

@@ -105,8 +105,9 @@ pub struct TrainSceneArgs {
     /// name the run writes: nothing of the user's is overwritten).
     #[arg(long, conflicts_with = "resume")]
     pub force: bool,
-    /// Cache folder for the demo scene and the fitted texture PCA.
-    #[arg(long, default_value = "runs/cache")]
+    /// Cache folder for the demo scene and the fitted texture PCA (default: `$XDG_CACHE_HOME/bitt`, else
+    /// `~/.cache/bitt`; never the current folder).
+    #[arg(long, default_value_os_t = crate::args::default_cache_dir())]
     pub cache: PathBuf,
     /// Frames of the turntable of novel views.
     #[arg(long, default_value_t = 8)]
