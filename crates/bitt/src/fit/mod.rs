@@ -210,9 +210,12 @@ pub const PALM_JOINTS: [usize; 6] = [0, 1, 5, 9, 13, 17];
 pub struct FitProgress {
     /// `root`, `all`, or `handedness` (the swapped-sides check).
     pub stage: &'static str,
-    /// Iteration within the whole fit (1-based).
+    /// Position within the whole fit (1-based): iterations run, plus the root-stage rounds
+    /// that no hand needed (skipped forward when a search ends early).
     pub iteration: usize,
-    /// Iterations the fit plans (each restart adds a round of the root stage).
+    /// The fit's whole length, fixed from the first iteration: every root-stage round the
+    /// configuration allows (`orientations`, twice with the handedness check), then the full
+    /// stage. (It used to grow with each restart: 540, 600, 660, 720.)
     pub iterations: usize,
     /// This iteration's loss.
     pub loss: f64,
@@ -748,6 +751,7 @@ impl Fitter<'_> {
         let mut best: [Option<(f64, HandParams, usize)>; 2] = [None, None];
         let threshold = self.config.restart_residual_px * self.scale;
         let mut tried = [0usize; 2];
+        let mut rounds_run = 0;
         for round in 0..rounds {
             let searching: Vec<bool> = (0..2)
                 .map(|h| {
@@ -758,10 +762,6 @@ impl Fitter<'_> {
                 .collect();
             if !searching.iter().any(|&s| s) {
                 break;
-            }
-            if round > 0 {
-                // A restart: the plan grows by one round.
-                self.planned += self.config.root_iterations;
             }
             let pick = |h: usize| -> &Start {
                 let c = &candidates[h];
@@ -775,6 +775,7 @@ impl Fitter<'_> {
             };
             let starts = start_params([pick(0), pick(1)]);
             let mut run = Run::new(self.models, [&starts[0], &starts[1]], self.device);
+            rounds_run += 1;
             let started = Instant::now();
             let iterations = self.config.root_iterations;
             let (first, last, res) =
@@ -798,6 +799,8 @@ impl Fitter<'_> {
                 seconds: started.elapsed().as_secs_f64(),
             });
         }
+        // The rounds no hand needed: skipped forward, so the planned total stays fixed.
+        self.done += (rounds - rounds_run) * self.config.root_iterations;
         Ok(RootResult { best, tried })
     }
 }
@@ -896,7 +899,9 @@ pub fn fit_keypoints(
         scale,
         device,
         done: 0,
-        planned: config.root_iterations * if config.check_handedness { 2 } else { 1 }
+        planned: config.root_iterations
+            * config.orientations
+            * if config.check_handedness { 2 } else { 1 }
             + config.full_iterations,
     };
     let relaxed: Vec<(Vec<DVec3>, DVec3)> = Side::BOTH
@@ -1320,6 +1325,48 @@ mod tests {
             e.contains("m from the camera (a photographed hand lies 0.05 to 20 m"),
             "{e}"
         );
+    }
+
+    /// Issue 37: the fit's progress total is fixed from the first iteration, the position
+    /// only grows, and it ends at the total (restarts or not).
+    #[test]
+    fn fit_progress_has_a_fixed_total() {
+        struct Record(Vec<(usize, usize)>);
+        impl FitObserver for Record {
+            fn iteration(&mut self, p: &FitProgress) {
+                self.0.push((p.iteration, p.iterations));
+            }
+        }
+        let (truth, keypoints) = scene();
+        let models = bitt_mesh::procedural_pair();
+        let device = Device::flex().autodiff();
+        let config = FitConfig {
+            root_iterations: 30,
+            full_iterations: 120,
+            restart_residual_px: 1e-9,
+            orientations: 3,
+            ..FitConfig::default()
+        };
+        for check_handedness in [false, true] {
+            let config = FitConfig {
+                check_handedness,
+                ..config.clone()
+            };
+            let mut seen = Record(Vec::new());
+            fit_keypoints(
+                &models,
+                &keypoints,
+                &truth.camera,
+                &config,
+                &device,
+                &mut seen,
+            )
+            .unwrap();
+            let total = 30 * 3 * if check_handedness { 2 } else { 1 } + 120;
+            assert!(seen.0.iter().all(|&(_, t)| t == total), "{:?}", seen.0);
+            assert!(seen.0.windows(2).all(|w| w[1].0 > w[0].0), "{:?}", seen.0);
+            assert_eq!(seen.0.last().unwrap().0, total);
+        }
     }
 
     /// Issue 38, class 10: a learning rate of 1e30 is named as such, not as a non-finite loss.
