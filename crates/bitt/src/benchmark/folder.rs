@@ -163,26 +163,14 @@ fn check_eval_folder(out: &Path, config: &serde_json::Value) -> Result<(), BittE
     if empty {
         return Ok(());
     }
-    let path = out.join("config.json");
-    let existing: Option<serde_json::Value> = std::fs::read_to_string(&path)
-        .ok()
-        .and_then(|t| serde_json::from_str(&t).ok())
-        .filter(|v: &serde_json::Value| {
-            v.as_object()
-                .is_some_and(|o| PLAN_KEYS.iter().all(|k| o.contains_key(*k)))
-        });
-    let Some(existing) = existing else {
+    let Some(existing) = existing_plan(out) else {
         return Err(BittError::Invalid(format!(
             "{}: the folder is not an evaluation (no config.json of one); nothing was written: \
              choose another --out",
             out.display()
         )));
     };
-    let differ: Vec<&str> = PLAN_KEYS
-        .iter()
-        .copied()
-        .filter(|k| existing[*k] != config[*k])
-        .collect();
+    let differ = plan_differences(&existing, config);
     if !differ.is_empty() {
         return Err(BittError::Invalid(format!(
             "{}: holds an evaluation with other settings ({} differ from this run's); its \
@@ -268,11 +256,7 @@ pub fn merge(dirs: &[PathBuf]) -> Result<String, BittError> {
         match &plan {
             None => plan = Some((dir, this)),
             Some((first, p)) => {
-                let differ: Vec<&str> = PLAN_KEYS
-                    .iter()
-                    .copied()
-                    .filter(|k| p[*k] != this[*k])
-                    .collect();
+                let differ = plan_differences(p, &this);
                 if !differ.is_empty() {
                     return Err(BittError::Invalid(format!(
                         "{} and {} are evaluations of other settings ({} differ in their \
@@ -350,26 +334,39 @@ pub fn merge(dirs: &[PathBuf]) -> Result<String, BittError> {
     Ok(md)
 }
 
-/// The plan (`config.json`) of evaluation folder `dir`.
-///
-/// # Errors
-/// A folder without the `config.json` of an evaluation.
-fn read_plan(dir: &Path) -> Result<serde_json::Value, BittError> {
-    let path = dir.join("config.json");
-    std::fs::read_to_string(&path)
+/// The plan (`config.json`, with every [`PLAN_KEYS`] entry) of evaluation folder `dir`, if it
+/// has one.
+fn existing_plan(dir: &Path) -> Option<serde_json::Value> {
+    std::fs::read_to_string(dir.join("config.json"))
         .ok()
         .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
         .filter(|v| {
             v.as_object()
                 .is_some_and(|o| PLAN_KEYS.iter().all(|k| o.contains_key(*k)))
         })
-        .ok_or_else(|| {
-            BittError::Invalid(format!(
-                "{}: not an evaluation folder (no config.json of one), so its results' settings \
-                 are unknown; nothing was written",
-                dir.display()
-            ))
-        })
+}
+
+/// The plan keys on which two plans differ.
+fn plan_differences(a: &serde_json::Value, b: &serde_json::Value) -> Vec<&'static str> {
+    PLAN_KEYS
+        .iter()
+        .copied()
+        .filter(|k| a[*k] != b[*k])
+        .collect()
+}
+
+/// The plan of evaluation folder `dir` ([`existing_plan`]).
+///
+/// # Errors
+/// A folder without the `config.json` of an evaluation.
+fn read_plan(dir: &Path) -> Result<serde_json::Value, BittError> {
+    existing_plan(dir).ok_or_else(|| {
+        BittError::Invalid(format!(
+            "{}: not an evaluation folder (no config.json of one), so its results' settings \
+             are unknown; nothing was written",
+            dir.display()
+        ))
+    })
 }
 
 /// Whether two results of one scene agree on everything but their timings (`seconds`).

@@ -113,6 +113,54 @@ pub fn check_hand_placement(
     Ok(())
 }
 
+/// Refuses a photo (`[3, S, S]`, at `hands`' camera) that is black or too dark under every
+/// projected vertex of the hands: none of those pixels passes the photo mask's `threshold`
+/// (mean RGB), so the photo is corrupt or not the annotation's. Checked before anything is
+/// fitted or cached.
+pub(crate) fn check_photo_under_hands(
+    image: &[f32],
+    hands: &TwoHandScene,
+    models: &HandPair,
+    threshold: f64,
+) -> Result<(), BittError> {
+    let (w, h) = (hands.camera.width as usize, hands.camera.height as usize);
+    let hw = w * h;
+    if image.len() != 3 * hw {
+        return Ok(());
+    }
+    let posed = hands.pose_in_camera(models)?;
+    let mut inside = 0usize;
+    for side in Side::BOTH {
+        let Some(hand) = posed.get(side) else {
+            continue;
+        };
+        for v in &hand.vertices {
+            let Some(p) = hands.camera.camera_to_pixel(*v) else {
+                continue;
+            };
+            let (x, y) = (p.x.round(), p.y.round());
+            if !(x >= 0.0 && y >= 0.0 && (x as usize) < w && (y as usize) < h) {
+                continue;
+            }
+            inside += 1;
+            let i = y as usize * w + x as usize;
+            let mean = f64::from(image[i] + image[hw + i] + image[2 * hw + i]) / 3.0;
+            if mean > threshold {
+                return Ok(());
+            }
+        }
+    }
+    if inside == 0 {
+        return Ok(());
+    }
+    Err(BittError::Invalid(format!(
+        "the photo is black or too dark where the hands are: none of the {inside} pixels under \
+         their vertices is brighter than the photo mask's threshold (mean RGB {threshold}); is \
+         the image corrupt, or does the annotation belong to another photo? (a --config with \
+         loss.photo_mask 0 trains on it anyway)"
+    )))
+}
+
 /// Crops an image `[3, H, W]` (with its full camera in `hands`) around the hands as the
 /// reference does and resizes it to `size`.
 pub fn prepare_view(
