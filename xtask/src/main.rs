@@ -1,11 +1,14 @@
 //! Project automation, run as `cargo xtask <command>` (alias in `.cargo/config.toml`).
 //!
 //! Heavy work always runs the `bitt` binary in release mode: nobody waits on a debug build
-//! of a numeric loop. Commands:
+//! of a numeric loop, and a command that only runs `bitt` builds only `bitt`, with cargo's
+//! progress shown. Commands:
 //!
 //! - `demo [ARGS]`: the built-in demo scene (`bitt demo`).
 //! - `test`: the whole test suite (release build) and then `e2e`.
 //! - `e2e`: the same computation on every backend (flex, ndarray, wgpu), compared.
+//! - `build-check`: the `bitt` binary built alone compiles every registry crate as the
+//!   tests do, so `test` after `train-scene` rebuilds none of them (`build_check.rs`).
 //! - `train-scene`, `eval`, `eval-merge`, `render-avatar`, `export`, `refine-hands`,
 //!   `fit-hands`, `detect-hands`, `pose-hands`, `convert-mano`, `texture`, `convert-html`,
 //!   `render` ARGS: forwarded to `bitt`.
@@ -38,6 +41,7 @@
 
 mod bench;
 mod bench_render;
+mod build_check;
 mod check_clients;
 mod fuzz;
 mod gpu_bundle;
@@ -77,22 +81,30 @@ fn check(status: ExitStatus, what: &str) -> Result<()> {
     Ok(())
 }
 
-/// Builds the workspace in release mode and returns the `bitt` binary's path.
+/// Builds the release `bitt` binary alone, with cargo's progress shown, and returns its path.
 ///
-/// Always the whole workspace with all targets: that is the feature set `cargo test
-/// --workspace --release` resolves too, so tests, `e2e` and the CLI share one build of burn
-/// (building `-p bitt-cli` alone would unify features differently and rebuild it).
+/// Only the binary: a user who runs the demo needs nothing else, and every test binary of the
+/// workspace in release mode is most of a cold build (and gigabytes on disk). One build of
+/// burn is still shared with the tests: resolver 3 gives `-p bitt-cli --bin bitt` the same
+/// feature set of every registry crate as `cargo test --workspace --release`, which `cargo
+/// xtask build-check` checks in CI (see `build_check.rs`).
 fn build_bitt() -> Result<PathBuf> {
     let status = cargo()
         .args([
             "build",
-            "--quiet",
             "--release",
-            "--workspace",
-            "--all-targets",
+            "--package",
+            "bitt-cli",
+            "--bin",
+            "bitt",
         ])
         .status()?;
     check(status, "building bitt")?;
+    Ok(release_dir().join(format!("bitt{}", std::env::consts::EXE_SUFFIX)))
+}
+
+/// The cargo target directory's `release` folder (`CARGO_TARGET_DIR`, else `target/`).
+fn release_dir() -> PathBuf {
     let target = std::env::var_os("CARGO_TARGET_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|| root().join("target"));
@@ -101,17 +113,18 @@ fn build_bitt() -> Result<PathBuf> {
     } else {
         target
     };
-    Ok(target
-        .join("release")
-        .join(format!("bitt{}", std::env::consts::EXE_SUFFIX)))
+    target.join("release")
 }
 
-/// Builds the workspace as [`build_bitt`] does and returns the path of the release example
-/// `name` of a library crate (`bench_render`, `write_docs_images`, ...).
+/// Builds the release example `name` of a library crate (`bench_render`, `write_docs_images`,
+/// ...) and returns its path.
 fn build_example(name: &str) -> Result<PathBuf> {
-    let bitt = build_bitt()?;
-    Ok(bitt
-        .with_file_name("examples")
+    let status = cargo()
+        .args(["build", "--release", "--workspace", "--example", name])
+        .status()?;
+    check(status, &format!("building the example {name}"))?;
+    Ok(release_dir()
+        .join("examples")
         .join(format!("{name}{}", std::env::consts::EXE_SUFFIX)))
 }
 
@@ -425,7 +438,7 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some((cmd, rest)) = args.split_first() else {
         bail!(
-            "usage: cargo xtask <demo|test|e2e|train-scene|render-avatar|export|eval|eval-merge|metrics|convert-lpips|detect-hands|convert-mediapipe|fit-hands|refine-hands|pose-hands|convert-mano|texture|convert-html|render|synth|fuzz|kill-test|bench|gpu-bundle|gpu-check|check-clients|docs-images|mesh-noise-calibration|fuzz-seeds> [ARGS]"
+            "usage: cargo xtask <demo|test|e2e|build-check|train-scene|render-avatar|export|eval|eval-merge|metrics|convert-lpips|detect-hands|convert-mediapipe|fit-hands|refine-hands|pose-hands|convert-mano|texture|convert-html|render|synth|fuzz|kill-test|bench|gpu-bundle|gpu-check|check-clients|docs-images|mesh-noise-calibration|fuzz-seeds> [ARGS]"
         );
     };
     match cmd.as_str() {
@@ -456,6 +469,7 @@ fn main() -> Result<()> {
             e2e()
         }
         "e2e" => e2e(),
+        "build-check" => build_check::build_check(),
         "fuzz" => fuzz::fuzz(rest),
         "kill-test" => kill_test::kill_test(rest),
         "gpu-bundle" => gpu_bundle::gpu_bundle().map(|_| ()),
