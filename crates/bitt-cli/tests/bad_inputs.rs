@@ -609,6 +609,7 @@ fn altered_run_files_are_named_not_trusted() {
             "0",
             "--out",
             &run,
+            "--keep-checkpoints",
         ],
     );
     case.succeeds(&strs(&args));

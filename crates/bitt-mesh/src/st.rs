@@ -18,6 +18,31 @@ use crate::{FileError, MeshError};
 /// One tensor to write: name, dtype, shape, little-endian bytes.
 pub type Entry = (String, Dtype, Vec<usize>, Vec<u8>);
 
+/// The value a `U8` entry of [`unit_entry`] stands for.
+fn from_unit_byte(k: u8) -> f32 {
+    f32::from(k) / 255.0
+}
+
+/// `values` (of `shape`) as an entry that is 4x smaller where it can be: `U8` holding
+/// `255 * value` when every value is exactly such a fraction `k / 255` (8-bit images, binary
+/// masks), else `F32`. [`Reader::unit_f32s`] reads either back bit for bit.
+pub fn unit_entry(name: impl Into<String>, shape: Vec<usize>, values: &[f32]) -> Entry {
+    let bytes: Option<Vec<u8>> = values
+        .iter()
+        .map(|&v| {
+            let k = (v * 255.0).round();
+            // `k` in range first: the cast saturates, and a value outside [0, 1] must not
+            // round-trip by accident.
+            ((0.0..=255.0).contains(&k) && from_unit_byte(k as u8).to_bits() == v.to_bits())
+                .then_some(k as u8)
+        })
+        .collect();
+    match bytes {
+        Some(b) => (name.into(), Dtype::U8, shape, b),
+        None => (name.into(), Dtype::F32, shape, f32_bytes(values)),
+    }
+}
+
 /// `f32` values as little-endian bytes.
 pub fn f32_bytes(values: &[f32]) -> Vec<u8> {
     let mut out = Vec::with_capacity(values.len() * 4);
@@ -362,6 +387,26 @@ impl<'a> Reader<'a> {
     }
 }
 
+impl Reader<'_> {
+    /// Tensor `name`, written by [`unit_entry`], as finite `f32` values of shape `want`: a
+    /// `U8` tensor's bytes as `k / 255`, an `F32` tensor as it is.
+    ///
+    /// # Errors
+    /// A missing tensor, another dtype or shape, a non-finite value.
+    pub fn unit_f32s(
+        &self,
+        name: &str,
+        want: Option<&[Option<usize>]>,
+    ) -> Result<(Vec<usize>, Vec<f32>), FileError> {
+        let is_u8 = self.st.tensor(name).is_ok_and(|t| t.dtype() == Dtype::U8);
+        if !is_u8 {
+            return self.finite_f32s(name, want);
+        }
+        let (shape, b) = self.raw(name, Dtype::U8, want)?;
+        Ok((shape, b.iter().copied().map(from_unit_byte).collect()))
+    }
+}
+
 /// An element type tensors are read as: its dtype and its little-endian decoding.
 pub trait Element: Sized {
     /// The dtype a tensor of this element type has.
@@ -394,6 +439,56 @@ fn from_le<T: Element>(bytes: &[u8]) -> Vec<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// 8-bit images and binary masks are stored as `U8` and read back bit for bit; anything
+    /// else (a value between the 256 steps, negative zero, out of range, NaN) stays `F32`.
+    #[test]
+    fn unit_values_shrink_to_bytes_only_when_exact() {
+        let path = Path::new("x.safetensors");
+        let image: Vec<f32> = (0..=255u8).map(|k| f32::from(k) / 255.0).collect();
+        let mask = vec![0.0, 1.0, 1.0, 0.0];
+        let entries = [
+            unit_entry("image", vec![256], &image),
+            unit_entry("mask", vec![2, 2], &mask),
+            unit_entry("between", vec![2], &[0.5, 0.25]),
+            unit_entry("negative_zero", vec![1], &[-0.0]),
+            unit_entry("above", vec![1], &[2.0]),
+            unit_entry("nan", vec![1], &[f32::NAN]),
+        ];
+        let dtypes: Vec<Dtype> = entries.iter().map(|e| e.1).collect();
+        assert_eq!(
+            dtypes,
+            [
+                Dtype::U8,
+                Dtype::U8,
+                Dtype::F32,
+                Dtype::F32,
+                Dtype::F32,
+                Dtype::F32
+            ]
+        );
+        assert_eq!(entries[0].3.len(), 256);
+        let bytes = serialize(path, &entries[..5], HashMap::new()).unwrap();
+        let r = Reader::open(&bytes, path).unwrap();
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        for (name, want) in [
+            ("image", &image[..]),
+            ("mask", &mask[..]),
+            ("between", &[0.5, 0.25][..]),
+            ("negative_zero", &[-0.0][..]),
+        ] {
+            assert_eq!(
+                bits(&r.unit_f32s(name, None).unwrap().1),
+                bits(want),
+                "{name}"
+            );
+        }
+        let e = r
+            .unit_f32s("mask", Some(&[Some(4)]))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("mask"), "{e}");
+    }
 
     /// Equal content gives equal bytes, whatever order the metadata map iterates in, and the
     /// file still reads with its tensors and metadata.

@@ -91,6 +91,17 @@ fn blur(image: &[f32], size: usize, sigma: f64) -> Vec<f32> {
     out
 }
 
+/// The image as an 8-bit file holds it: every value clamped to [0, 1] and rounded to the
+/// nearest `k / 255`. The generator's ground-truth images are 8-bit, as the rendered
+/// datasets of the paper (saved as PNG) and every photograph are; that also lets a run keep
+/// them as bytes (`bitt_mesh::st::unit_entry`).
+pub fn to_8bit(image: &[f32]) -> Vec<f32> {
+    image
+        .iter()
+        .map(|&v| f32::from((v.clamp(0.0, 1.0) * 255.0).round() as u8) / 255.0)
+        .collect()
+}
+
 /// Encodes as 8-bit JPEG at `quality` and decodes again.
 fn jpeg(image: &[f32], size: usize, quality: u8) -> Result<Vec<f32>, SynthError> {
     let hw = size * size;

@@ -5,8 +5,10 @@
 //! - `scene.json`: format tag, [`GENERATOR_VERSION`], configuration, seed, identity, studio
 //!   light, training degradation, Table-3 statistics, the given meshes, and per view its name,
 //!   pose family, hand parameters with camera ([`TwoHandScene`]) and light (camera frame);
-//! - `data.safetensors`: exact `f32` tensors `<view>/image` `[3, H, W]`, `<view>/masks`
-//!   `[2, H, W]` (left, right) and `texture_left`, `texture_right` `[3, T]`, and
+//! - `data.safetensors`: exact tensors `<view>/image` `[3, H, W]`, `<view>/masks`
+//!   `[2, H, W]` (left, right; both `U8` holding `255 * value` when that is exact, as for the
+//!   generator's 8-bit images and binary masks, else `f32`: `st::unit_entry`) and
+//!   `texture_left`, `texture_right` (`f32` `[3, T]`), and
 //!   `scene_exact_json` (`U8`): `scene.json` again with every float as its bit pattern, which
 //!   reading uses (serde_json's float parsing is not always exact to the last bit); its only
 //!   metadata is `format` (a single key, so the bytes are deterministic);
@@ -37,7 +39,9 @@ use crate::{
 /// - 1: first release.
 /// - 2: personal appearance patches ([`crate::AppearancePatch`]) on both hands.
 /// - 3: the procedural hand's rounder wrist cap (issue 34).
-pub const GENERATOR_VERSION: u32 = 3;
+/// - 4: every image 8-bit, as a PNG holds it (`degrade::to_8bit`; the training image was
+///   already, through its JPEG degradation).
+pub const GENERATOR_VERSION: u32 = 4;
 
 /// The `format` of `scene.json` and `data.safetensors`.
 const FORMAT: &str = "bitt-synth-scene";
@@ -172,19 +176,17 @@ pub(crate) fn write(scene: &SynthScene, dir: &Path) -> Result<(), SynthError> {
                 v.name
             )));
         }
-        entries.push((
+        entries.push(st::unit_entry(
             format!("{}/image", v.name),
-            Dtype::F32,
             vec![3, size, size],
-            f32_bytes(&v.image),
+            &v.image,
         ));
         let mut masks = v.masks[0].clone();
         masks.extend_from_slice(&v.masks[1]);
-        entries.push((
+        entries.push(st::unit_entry(
             format!("{}/masks", v.name),
-            Dtype::F32,
             vec![2, size, size],
-            f32_bytes(&masks),
+            &masks,
         ));
     }
     for (k, name) in ["texture_left", "texture_right"].iter().enumerate() {
@@ -278,7 +280,7 @@ pub(crate) fn read(dir: &Path) -> Result<SynthScene, SynthError> {
     let r = st::Reader::open(&bytes, &data_path)?;
     let tensor = |name: &str, shape: &[usize]| -> Result<Vec<f32>, SynthError> {
         let want: Vec<Option<usize>> = shape.iter().copied().map(Some).collect();
-        Ok(r.values::<f32>(name, &want)?.1)
+        Ok(r.unit_f32s(name, Some(&want))?.1)
     };
     let exact = r.bytes(EXACT)?;
     let file: SceneFile = serde_json::from_slice::<serde_json::Value>(exact)

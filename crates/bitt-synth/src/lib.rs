@@ -269,7 +269,7 @@ impl SynthScene {
 
     /// Writes the scene into folder `dir` (created if missing): `scene.json` (configuration,
     /// seed, identity, light, statistics, hand parameters, camera and light of every view, the
-    /// given meshes), `data.safetensors` (every image, mask and texture as exact `f32`), and
+    /// given meshes), `data.safetensors` (every image, mask and texture, exactly: 8-bit images and masks as bytes), and
     /// for looking at: `<view>.png`, `<view>.mask.png` (red left, green right) and
     /// `texture_left.png` / `texture_right.png` (UV images). Every file is written atomically.
     ///
@@ -397,7 +397,7 @@ pub fn generate_scene(
                 family,
                 hands: scene,
                 light: l,
-                image: r.image.clone(),
+                image: degrade::to_8bit(&r.image),
                 masks: r.masks.clone(),
             },
             r,
@@ -407,7 +407,7 @@ pub fn generate_scene(
     let stats = stats::view_stats(&models, &layouts, &train_render)?;
     let train_degradation = if config.degrade {
         let d = Degradation::sample(&mut rng(stream::DEGRADE));
-        train.image = d.apply(&train.image, size as usize)?;
+        train.image = d.apply(&train_render.image, size as usize)?;
         Some(d)
     } else {
         None

@@ -62,6 +62,8 @@ pub mod files {
     pub const REFINE_OVERLAY: &str = "overlay.png";
     /// Scores of a real multi-view run against the photographs of its novel views and poses.
     pub const REAL_SCORES: &str = "real_scores.json";
+    /// The trained textures and light parameters (what `render-avatar` and `export` read).
+    pub const TEXTURES: &str = "textures/textures.safetensors";
 }
 
 /// Writes a real run's scores ([`crate::real::score_real`]) to [`files::REAL_SCORES`].
@@ -1010,7 +1012,7 @@ impl SavedAvatar {
     /// Reads the fine textures `[3, T]` (left, right) of a run's
     /// `textures/textures.safetensors`.
     pub fn read_fine_textures(dir: &Path) -> Result<[Vec<f32>; 2], BittError> {
-        let path = dir.join("textures/textures.safetensors");
+        let path = dir.join(files::TEXTURES);
         let bytes = st::read_file(&path)?;
         let r = st::Reader::open(&bytes, &path)?;
         let texture = |name: &str| -> Result<Vec<f32>, BittError> {

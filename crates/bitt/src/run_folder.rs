@@ -99,7 +99,7 @@ pub fn out_folder(dir: &Path) -> Result<OutFolder, BittError> {
             dir.display()
         )));
     }
-    if dir.join(files::CHECKPOINT).exists() || dir.join(files::CHECKPOINT_PREVIOUS).exists() {
+    if has_checkpoint(dir) || is_finished_run(dir) {
         return Ok(OutFolder::Run);
     }
     let names: Vec<String> = std::fs::read_dir(dir)
@@ -156,6 +156,12 @@ pub fn fresh_out(
             return Ok((out.to_path_buf(), None));
         }
         _ if out == default => {}
+        OutFolder::Run if !has_checkpoint(out) => {
+            return Err(BittError::Invalid(format!(
+                "{} already holds a finished run; choose another --out",
+                out.display()
+            )));
+        }
         OutFolder::Run => {
             return Err(BittError::Invalid(format!(
                 "{} already holds a run; use --resume {} to continue it or choose another --out",
@@ -290,6 +296,90 @@ pub fn write_fresh_run(
     Ok(())
 }
 
+/// Whether `dir` holds a checkpoint (the latest or the previous one).
+pub fn has_checkpoint(dir: &Path) -> bool {
+    dir.join(files::CHECKPOINT).exists() || dir.join(files::CHECKPOINT_PREVIOUS).exists()
+}
+
+/// Whether `dir` holds a run that finished writing its results: its configuration, metrics
+/// and textures (with or without its checkpoints).
+pub fn is_finished_run(dir: &Path) -> bool {
+    dir.join(files::CONFIG).is_file()
+        && dir.join(files::METRICS).is_file()
+        && dir.join(files::TEXTURES).is_file()
+}
+
+/// What [`remove_checkpoints`] did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct CheckpointCleanup {
+    /// Files removed and their bytes.
+    pub removed: Vec<(PathBuf, u64)>,
+    /// The checkpoint kept, if any, and its bytes.
+    pub kept: Option<(PathBuf, u64)>,
+}
+
+impl CheckpointCleanup {
+    /// The line that tells the user what happened.
+    pub fn line(&self) -> String {
+        let mb = |b: u64| b as f64 / 1e6;
+        let freed: u64 = self.removed.iter().map(|(_, b)| b).sum();
+        match &self.kept {
+            Some((path, bytes)) => format!(
+                "kept {} ({:.1} MB) for `--resume --iterations N`{}",
+                path.display(),
+                mb(*bytes),
+                if self.removed.is_empty() {
+                    String::new()
+                } else {
+                    format!("; removed the one before it ({:.1} MB)", mb(freed))
+                }
+            ),
+            None if self.removed.is_empty() => "no checkpoint to remove".to_string(),
+            None => format!(
+                "removed the run's {} checkpoint{} ({:.1} MB): the run is finished \
+                 (--keep-checkpoints keeps the latest, to train it further with --resume)",
+                self.removed.len(),
+                if self.removed.len() == 1 { "" } else { "s" },
+                mb(freed)
+            ),
+        }
+    }
+}
+
+/// Removes the checkpoints of the finished run in `dir`, or all but the latest when
+/// `keep_latest`. The previous checkpoint only guards a checkpoint write that a kill cuts
+/// short, so a finished run never needs it.
+///
+/// # Errors
+/// `dir` holds no finished run (nothing is removed then), or a file cannot be removed.
+pub fn remove_checkpoints(dir: &Path, keep_latest: bool) -> Result<CheckpointCleanup, BittError> {
+    if !is_finished_run(dir) {
+        return Err(BittError::Invalid(format!(
+            "{}: holds no finished run (config.json, metrics.json and {}); its checkpoints \
+             are kept",
+            dir.display(),
+            files::TEXTURES
+        )));
+    }
+    let mut cleanup = CheckpointCleanup::default();
+    for (name, keep) in [
+        (files::CHECKPOINT_PREVIOUS, false),
+        (files::CHECKPOINT, keep_latest),
+    ] {
+        let path = dir.join(name);
+        let Ok(meta) = std::fs::metadata(&path) else {
+            continue;
+        };
+        if keep {
+            cleanup.kept = Some((path, meta.len()));
+        } else {
+            std::fs::remove_file(&path).map_err(|e| BittError::io(&path, e))?;
+            cleanup.removed.push((path, meta.len()));
+        }
+    }
+    Ok(cleanup)
+}
+
 /// A run's latest checkpoint and the one before it, with warnings for the user. A latest
 /// file that is missing or fails its checks is reported, and the previous one (kept by the
 /// trainer) is resumed instead.
@@ -338,6 +428,49 @@ mod tests {
         let _ = std::fs::remove_dir_all(&d);
         std::fs::create_dir_all(&d).unwrap();
         d
+    }
+
+    /// A finished run loses its checkpoints (or all but the latest) and stays a run of ours:
+    /// the default folder moves past it and an explicit --out naming it is refused. A folder
+    /// whose results are not all written keeps its checkpoints.
+    #[test]
+    fn finished_runs_drop_their_checkpoints_and_stay_runs() {
+        let dir = scratch("checkpoints");
+        let run = dir.join("runs/train-scene");
+        std::fs::create_dir_all(run.join("textures")).unwrap();
+        std::fs::write(run.join(files::CHECKPOINT), [1u8; 30]).unwrap();
+        std::fs::write(run.join(files::CHECKPOINT_PREVIOUS), [2u8; 20]).unwrap();
+        std::fs::write(run.join(files::CONFIG), "{}").unwrap();
+        let e = remove_checkpoints(&run, false).unwrap_err().to_string();
+        assert!(e.contains("no finished run"), "{e}");
+        assert!(has_checkpoint(&run) && run.join(files::CHECKPOINT_PREVIOUS).exists());
+        std::fs::write(run.join(files::METRICS), "{}").unwrap();
+        std::fs::write(run.join(files::TEXTURES), "x").unwrap();
+        let kept = remove_checkpoints(&run, true).unwrap();
+        assert_eq!(kept.kept, Some((run.join(files::CHECKPOINT), 30)));
+        assert_eq!(
+            kept.removed,
+            vec![(run.join(files::CHECKPOINT_PREVIOUS), 20)]
+        );
+        assert!(kept.line().starts_with("kept "), "{}", kept.line());
+        let removed = remove_checkpoints(&run, false).unwrap();
+        assert_eq!(removed.removed, vec![(run.join(files::CHECKPOINT), 30)]);
+        assert!(
+            removed.line().contains("--keep-checkpoints"),
+            "{}",
+            removed.line()
+        );
+        assert!(!has_checkpoint(&run));
+        assert_eq!(out_folder(&run).unwrap(), OutFolder::Run);
+        assert_eq!(
+            fresh_out(&run, &run, false).unwrap().0,
+            dir.join("runs/train-scene-2")
+        );
+        let e = fresh_out(&run, &dir.join("default"), false)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("already holds a finished run"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     /// Rerunning with the default folder moves on to a numbered one; an explicit folder that

@@ -30,7 +30,10 @@ use crate::refine::{
     MeshRefine, RefineConfig, RefineObserver, Refinement, pca_pose_notes, refine_synthetic,
 };
 use crate::run::{RunSummary, files, synthetic_trainer, texture_prior_with_progress, write_run};
-use crate::run_folder::{FitOutput, RunInput, load_checkpoints, missing_input, write_fresh_run};
+use crate::run_folder::{
+    FitOutput, RunInput, has_checkpoint, is_finished_run, load_checkpoints, missing_input,
+    write_fresh_run,
+};
 use crate::trainer::Trainer;
 
 /// What the setup of a run tells on the way: lines for the user, and progress displays for
@@ -529,6 +532,14 @@ pub fn resumed_run(
     if let Some(missing) = missing_input(dir) {
         return Err(BittError::Invalid(format!(
             "--resume {}: {missing}",
+            dir.display()
+        )));
+    }
+    if !has_checkpoint(dir) && is_finished_run(dir) {
+        return Err(BittError::Invalid(format!(
+            "--resume {}: the run is finished and its checkpoints were removed at its end \
+             (`train-scene --keep-checkpoints` keeps the latest); its results are all there, and \
+             training longer needs a new run with more --iterations",
             dir.display()
         )));
     }

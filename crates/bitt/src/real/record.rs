@@ -270,11 +270,10 @@ fn float_slots(scene: &mut TwoHandScene) -> Vec<&mut f64> {
 fn write_image_safetensors(path: &Path, views: &[&RealView], size: usize) -> Result<(), BittError> {
     let mut entries: Vec<st::Entry> = Vec::new();
     for v in views {
-        entries.push((
+        entries.push(st::unit_entry(
             v.name.clone(),
-            safetensors::Dtype::F32,
             vec![3, size, size],
-            st::f32_bytes(&v.image),
+            &v.image,
         ));
         let mut hands = v.hands.clone();
         let floats = st::f64_bytes(float_slots(&mut hands).into_iter().map(|x| *x));
@@ -287,7 +286,8 @@ fn write_image_safetensors(path: &Path, views: &[&RealView], size: usize) -> Res
     }
     let meta = std::collections::HashMap::from([(
         "format".to_string(),
-        "bitt-real-input-images: per view, `NAME` [3, S, S] f32 in [0, 1] and `hands.NAME` \
+        "bitt-real-input-images: per view, `NAME` [3, S, S] in [0, 1] (f32, or u8 holding \
+         255 * value where that is exact) and `hands.NAME` \
          the exact f64 values of input.json's hands and camera"
             .to_string(),
     )]);
@@ -319,6 +319,6 @@ fn read_image_tensor(
     size: usize,
 ) -> Result<Vec<f32>, BittError> {
     let r = st::Reader::open(bytes, path)?;
-    let (_, v) = r.finite_f32s(name, Some(&[Some(3), Some(size), Some(size)]))?;
+    let (_, v) = r.unit_f32s(name, Some(&[Some(3), Some(size), Some(size)]))?;
     Ok(v)
 }
