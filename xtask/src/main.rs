@@ -89,6 +89,13 @@ fn check(status: ExitStatus, what: &str) -> Result<()> {
 /// feature set of every registry crate as `cargo test --workspace --release`, which `cargo
 /// xtask build-check` checks in CI (see `build_check.rs`).
 fn build_bitt() -> Result<PathBuf> {
+    let bin = release_dir().join(format!("bitt{}", std::env::consts::EXE_SUFFIX));
+    if !bin.is_file() {
+        println!(
+            "xtask: building the release `bitt` binary first (about 470 crates; 17 min from \
+             an empty target folder on 2 cores, then seconds)"
+        );
+    }
     let status = cargo()
         .args([
             "build",
@@ -100,7 +107,7 @@ fn build_bitt() -> Result<PathBuf> {
         ])
         .status()?;
     check(status, "building bitt")?;
-    Ok(release_dir().join(format!("bitt{}", std::env::consts::EXE_SUFFIX)))
+    Ok(bin)
 }
 
 /// The cargo target directory's `release` folder (`CARGO_TARGET_DIR`, else `target/`).
