@@ -2,7 +2,7 @@
 //! file, written atomically, checksummed, restored exactly.
 //!
 //! Format `bitt-checkpoint-2`: tensors `param.i`, `adam_m.i`, `adam_v.i` (F32), `history`
-//! (F64 `[iterations, 7]`: the six loss terms and the total, bit-exact) and `progress` (F64
+//! (F64 `[iterations, LossTerms::COUNT + 1]`: the loss terms and the total, bit-exact) and `progress` (F64
 //! `[lr_scale, seconds]`); metadata `iteration`, `parameters`, `adam_steps`, `events`,
 //! `tensors` (how many), and the `checksums` and `metadata_checksum` that [`bitt_mesh::st`]
 //! writes into every file (and verifies). Every count, checksum and shape is verified on
@@ -25,7 +25,7 @@ pub const CHECKPOINT_FORMAT: &str = "bitt-checkpoint-2";
 const CHECKPOINT_FORMAT_1: &str = "bitt-checkpoint-1";
 
 /// Values per `history` row: the six loss terms, then the total.
-const HISTORY_COLUMNS: usize = 7;
+const HISTORY_COLUMNS: usize = LossTerms::COUNT + 1;
 
 /// One flattened tensor: shape and values.
 pub type HostTensor = (Vec<usize>, Vec<f32>);
@@ -190,7 +190,7 @@ impl Checkpoint {
             let rows = f64s("history", 2)?;
             let history: Vec<LossTerms> = rows
                 .chunks_exact(HISTORY_COLUMNS)
-                .map(|r| LossTerms::from_values(&r[..6], r[6]))
+                .filter_map(|r| r.try_into().ok().map(LossTerms::from_row))
                 .collect();
             if rows.len() != history.len() * HISTORY_COLUMNS {
                 return Err(bad(format!(

@@ -40,9 +40,21 @@ pub struct LossTerms {
 }
 
 impl LossTerms {
+    /// How many terms there are (the total aside). Everything that stores or draws the terms
+    /// (the trainer's read-back, the checkpoint's history rows, the loss plot's colours) is
+    /// sized by it, so adding a term means editing this type, [`Loss`] and the plot's colours.
+    pub const COUNT: usize = 6;
+
     /// Names of the terms, as in `metrics.json`.
-    pub const NAMES: [&'static str; 6] =
+    pub const NAMES: [&'static str; Self::COUNT] =
         ["rec_fine", "rec_coarse", "rec_albedo", "nv", "alb", "sym"];
+
+    /// From a row of [`LossTerms::values`]: the terms in [`LossTerms::NAMES`] order, then the
+    /// total (`COUNT + 1` values).
+    pub fn from_row(row: &[f64; Self::COUNT + 1]) -> Self {
+        let (terms, total) = row.split_at(Self::COUNT);
+        Self::from_values(terms, total[0])
+    }
 
     /// From the values of [`Loss::terms`] and the total.
     pub fn from_values(v: &[f64], total: f64) -> Self {
@@ -57,8 +69,8 @@ impl LossTerms {
         }
     }
 
-    /// The six terms in [`LossTerms::NAMES`] order, then the total.
-    pub fn values(&self) -> [f64; 7] {
+    /// The terms in [`LossTerms::NAMES`] order, then the total.
+    pub fn values(&self) -> [f64; Self::COUNT + 1] {
         [
             self.rec_fine,
             self.rec_coarse,

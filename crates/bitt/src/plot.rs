@@ -51,7 +51,7 @@ static FONT: &[u8] = include_bytes!("../assets/fonts/DejaVuSans-subset.ttf");
 
 /// The total's colour and each term's, in [`LossTerms::NAMES`] order.
 const TOTAL_COLOR: RGBColor = RGBColor(0, 0, 0);
-const TERM_COLORS: [RGBColor; 6] = [
+const TERM_COLORS: [RGBColor; LossTerms::COUNT] = [
     RGBColor(220, 50, 47),
     RGBColor(38, 139, 210),
     RGBColor(133, 153, 0),

@@ -241,7 +241,13 @@ impl Trainer {
     pub fn step(&mut self) -> Result<(LossTerms, f64), BittError> {
         let outputs = self.forward()?;
         let l = loss(&outputs, &self.view, &self.config.loss);
-        let mut values: Vec<f64> = Vec::with_capacity(7);
+        if l.terms.len() != LossTerms::COUNT {
+            return Err(BittError::Invalid(format!(
+                "the loss has {} terms, LossTerms::COUNT says {}",
+                l.terms.len(),
+                LossTerms::COUNT
+            )));
+        }
         let stacked = Tensor::cat(
             l.terms
                 .iter()
@@ -256,9 +262,13 @@ impl Trainer {
             .mean()
             .reshape([1]);
         let host = read(Tensor::cat(vec![stacked, psnr_mse], 0))?;
-        values.extend(host[..7].iter().map(|&v| f64::from(v)));
-        let terms = LossTerms::from_values(&values[..6], values[6]);
-        let psnr = psnr_from_mse(f64::from(host[7]));
+        // The terms and the total, then the PSNR's squared error.
+        let mut row = [0.0; LossTerms::COUNT + 1];
+        for (r, &v) in row.iter_mut().zip(&host) {
+            *r = f64::from(v);
+        }
+        let terms = LossTerms::from_row(&row);
+        let psnr = psnr_from_mse(f64::from(host[LossTerms::COUNT + 1]));
         if !terms.is_finite() {
             return Err(BittError::NonFinite(format!(
                 "loss at iteration {}: {terms:?}",
