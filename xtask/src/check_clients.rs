@@ -136,8 +136,6 @@ fn prepare_run(run: Option<&Path>, iterations: usize) -> Result<PathBuf> {
         .args(["--iterations", &iterations.to_string()])
         .arg("--out")
         .arg(&dir)
-        .arg("--cache")
-        .arg(crate::root().join("runs/cache"))
         .output()
         .context("running bitt train-scene")?;
     if !out.status.success() {

@@ -674,7 +674,7 @@ fn run(o: &Options, t: &mut Transcript) -> Result<()> {
     let built = match &o.bitt {
         Some(p) => p.clone(),
         None => {
-            t.say("building the release binary (cargo build --release --workspace --all-targets)");
+            t.say("building the release binary (cargo build --release -p bitt-cli --bin bitt)");
             crate::build_bitt()?
         }
     };
