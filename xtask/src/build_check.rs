@@ -93,14 +93,7 @@ fn differences(
 }
 
 pub fn build_check() -> Result<()> {
-    let binary = registry_units(&[
-        "build",
-        "--release",
-        "--package",
-        "bitt-cli",
-        "--bin",
-        "bitt",
-    ])?;
+    let binary = registry_units(&crate::BUILD_BITT)?;
     let builds = [
         (
             "cargo test --workspace --release",

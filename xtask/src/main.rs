@@ -81,6 +81,16 @@ fn check(status: ExitStatus, what: &str) -> Result<()> {
     Ok(())
 }
 
+/// The cargo command line that builds the release `bitt` binary alone.
+const BUILD_BITT: [&str; 6] = [
+    "build",
+    "--release",
+    "--package",
+    "bitt-cli",
+    "--bin",
+    "bitt",
+];
+
 /// Builds the release `bitt` binary alone, with cargo's progress shown, and returns its path.
 ///
 /// Only the binary: a user who runs the demo needs nothing else, and every test binary of the
@@ -96,16 +106,7 @@ fn build_bitt() -> Result<PathBuf> {
              an empty target folder on 2 cores, then seconds)"
         );
     }
-    let status = cargo()
-        .args([
-            "build",
-            "--release",
-            "--package",
-            "bitt-cli",
-            "--bin",
-            "bitt",
-        ])
-        .status()?;
+    let status = cargo().args(BUILD_BITT).status()?;
     check(status, "building bitt")?;
     Ok(bin)
 }
