@@ -41,6 +41,7 @@ use crate::config::OptimConfig;
 use crate::hand_layer::{HandLayer, HandLayerParams, host_params};
 use crate::hand_priors::{FLEXION_RANGE, HandPriors, flexion_angles, flexion_axes};
 use crate::optim::{Adam, MAX_LEARNING_RATE};
+use crate::pipeline::read;
 
 pub use eval::{
     FitScores, SceneFitResult, SyntheticFitSettings, SyntheticKeypoints, fit_eval_line,
@@ -354,13 +355,6 @@ fn float<const D: usize>(v: Vec<f32>, shape: [usize; D], device: &Device) -> Ten
     Tensor::from_data(TensorData::new(v, shape), device)
 }
 
-fn host<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.into_data()
-        .convert::<f32>()
-        .try_into_vec::<f32>()
-        .unwrap_or_default()
-}
-
 fn f32s(v: &[f64]) -> Vec<f32> {
     v.iter().map(|&x| x as f32).collect()
 }
@@ -671,7 +665,7 @@ impl Fitter<'_> {
                 loss = loss + self.priors.penetration(joints, config.joint_radius) * w.penetration;
             }
             let value = f64::from(
-                host(loss.clone().detach())
+                read(loss.clone().detach())?
                     .first()
                     .copied()
                     .unwrap_or(f32::NAN),

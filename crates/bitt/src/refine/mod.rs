@@ -44,7 +44,7 @@ use crate::hand_layer::{HandLayer, HandLayerParams, has_learned_pose_pca, host_p
 use crate::hand_priors::HandPriors;
 use crate::metrics::mask_iou;
 use crate::optim::{Adam, MAX_LEARNING_RATE};
-use crate::pipeline::point_light;
+use crate::pipeline::{point_light, read};
 
 pub use crate::outputs::overlay_scale;
 pub use jobs::{
@@ -484,22 +484,6 @@ fn float<const D: usize>(v: Vec<f32>, shape: [usize; D], device: &Device) -> Ten
     Tensor::from_data(TensorData::new(v, shape), device)
 }
 
-fn scalar(t: Tensor<1>) -> f64 {
-    t.into_data()
-        .convert::<f32>()
-        .try_into_vec::<f32>()
-        .ok()
-        .and_then(|v| v.first().copied())
-        .map_or(f64::NAN, f64::from)
-}
-
-fn host<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.into_data()
-        .convert::<f32>()
-        .try_into_vec::<f32>()
-        .unwrap_or_default()
-}
-
 /// Exact Euclidean distance (pixels) from every pixel to the nearest pixel of `mask`
 /// (`[H, W]`, > 0.5 is inside; 0 inside), Felzenszwalb and Huttenlocher's two passes.
 pub fn distance_to_mask(mask: &[f32], [h, w]: [usize; 2]) -> Vec<f32> {
@@ -815,7 +799,7 @@ pub fn refine_hands(
                 )));
             }
             let covered = raster.mask(device);
-            let covered_host = host(covered.clone());
+            let covered_host = read(covered.clone())?;
             iou = mask_iou(&covered_host, &target.mask);
             if done == 0 {
                 iou_before = iou;
@@ -836,8 +820,8 @@ pub fn refine_hands(
             let outside = dist.sum() / (n as f64);
 
             // Uncovered mask pixels pull their nearest projected vertex.
-            let pxh = host(px.clone());
-            let pyh = host(py.clone());
+            let pxh = read(px.clone())?;
+            let pyh = read(py.clone())?;
             let uncovered: Vec<usize> = mask_pixels
                 .iter()
                 .copied()
@@ -911,7 +895,9 @@ pub fn refine_hands(
                     continue;
                 }
                 let t = term.reshape([1]) * weight;
-                values[i] = scalar(t.clone().detach());
+                values[i] = read(t.clone().detach())?
+                    .first()
+                    .map_or(f64::NAN, |&v| f64::from(v));
                 loss = Some(match loss {
                     Some(l) => l + t,
                     None => t,
