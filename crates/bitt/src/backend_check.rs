@@ -15,7 +15,7 @@ use bitt_texture::{TextureLayout, TexturePca};
 
 use crate::BittError;
 use crate::hand_layer::{HandLayer, HandLayerParams};
-use crate::trainer::read;
+use crate::pipeline::read;
 
 /// Deterministic inputs: smooth, non-symmetric patterns (no RNG, so every backend sees the
 /// same bits).

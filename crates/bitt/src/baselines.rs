@@ -24,7 +24,8 @@ use crate::BittError;
 use crate::config::OptimConfig;
 use crate::optim::Adam;
 use crate::pipeline::point_light;
-use crate::trainer::{Trainer, read};
+use crate::pipeline::read;
+use crate::trainer::Trainer;
 
 /// A baseline method.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]

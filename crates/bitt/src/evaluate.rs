@@ -12,7 +12,8 @@ use crate::BittError;
 use crate::assets::ViewGeometry;
 use crate::metrics::{ImageMetrics, TextureErrors, image_metrics, texture_errors};
 use crate::pipeline::Outputs;
-use crate::trainer::{Trainer, read};
+use crate::pipeline::read;
+use crate::trainer::Trainer;
 
 /// Host copies of a trained avatar: compact textures `[3, T]` and the estimated light.
 #[derive(Debug, Clone)]

@@ -20,7 +20,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use crate::BittError;
 use crate::error::WithContext;
 use crate::outputs::{contact_sheet_on, fill_hidden_texels};
-use crate::trainer::read;
+use crate::pipeline::read;
 
 /// Side of each view of the `--views` grid.
 pub const VIEW_SIZE: usize = 256;

@@ -373,7 +373,7 @@ impl LpipsVgg {
             if c == 1 { t.repeat_dim(1, 3) } else { t }
         };
         let d = self.forward(prep(a), prep(b));
-        let v = crate::trainer::read(d)?;
+        let v = crate::pipeline::read(d)?;
         let v = f64::from(v[0]);
         if v.is_finite() {
             Ok(v)
@@ -497,7 +497,7 @@ mod tests {
         };
         let x = Tensor::cat(vec![t(&a), t(&a)], 0);
         let y = Tensor::cat(vec![t(&a), t(&b)], 0);
-        let d = crate::trainer::read(net.forward(x, y)).unwrap();
+        let d = crate::pipeline::read(net.forward(x, y)).unwrap();
         assert_eq!(d.len(), 2);
         assert!(d[0].abs() < 1e-6);
         assert!((f64::from(d[1]) - ab).abs() < 1e-5, "{} vs {ab}", d[1]);

@@ -23,7 +23,8 @@ use crate::outputs::{
     base64, contact_sheet, mask_rgb, rgb_image, texture_image, write_avatar_glb, write_json,
     write_loss_plot, write_png,
 };
-use crate::trainer::{Trainer, read};
+use crate::pipeline::read;
+use crate::trainer::Trainer;
 
 /// Writes one named PNG `[3, h, w]` and lists it in the report.
 type PngSink<'a> = dyn FnMut(&str, PathBuf, &[f32], usize, usize) -> Result<(), BittError> + 'a;

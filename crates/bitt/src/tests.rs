@@ -340,7 +340,7 @@ fn a_non_finite_loss_is_recovered_from() {
     let saved = crate::run::SavedAvatar::load(&dir).unwrap();
     let hands = saved.view(None, 0.0, 0.0).unwrap();
     let image = saved.render(&hands, None, &Device::flex()).unwrap();
-    let fine = crate::trainer::read(t.forward().unwrap().fine_image.inner()).unwrap();
+    let fine = crate::pipeline::read(t.forward().unwrap().fine_image.inner()).unwrap();
     let diff = image
         .iter()
         .zip(&fine)
@@ -668,7 +668,7 @@ fn an_untrusted_photo_pixel_neither_trains_nor_unwraps() {
     let device = Device::flex().autodiff();
     let t = synthetic_trainer(&scene, &config, &pca, &device).unwrap();
     let s = config.nets.image_size;
-    let drawn = crate::trainer::read(t.view.mask.clone().inner()).unwrap();
+    let drawn = crate::pipeline::read(t.view.mask.clone().inner()).unwrap();
     let visible_before: Vec<usize> = t
         .view
         .plans
@@ -696,12 +696,12 @@ fn an_untrusted_photo_pixel_neither_trains_nor_unwraps() {
         .map(|p| p.visible().iter().filter(|&&v| v).count())
         .collect();
     assert_eq!(after[0] + r.dropped[0], visible_before[0]);
-    let weight = crate::trainer::read(half.weight.clone().expect("applied").inner()).unwrap();
+    let weight = crate::pipeline::read(half.weight.clone().expect("applied").inner()).unwrap();
     for p in 0..s * s {
         let expect = if drawn[p] > 0.5 && !keep[p] { 0.0 } else { 1.0 };
         assert_eq!(weight[p], expect, "pixel {p}");
     }
-    let v = crate::trainer::read(half.visible[0].clone().inner()).unwrap();
+    let v = crate::pipeline::read(half.visible[0].clone().inner()).unwrap();
     assert_eq!(v.iter().filter(|&&x| x > 0.5).count(), after[0]);
     // The loss does not see the untrusted pixels.
     let mut t = t;
@@ -709,7 +709,7 @@ fn an_untrusted_photo_pixel_neither_trains_nor_unwraps() {
     let outputs = t.forward().unwrap();
     let rec_fine = |v: &crate::pipeline::TrainingView| {
         let l = crate::losses::loss(&outputs, v, &t.config.loss);
-        crate::trainer::read(l.terms[0].clone()).unwrap()[0]
+        crate::pipeline::read(l.terms[0].clone()).unwrap()[0]
     };
     let before = rec_fine(&t.view);
     let mut changed = half;

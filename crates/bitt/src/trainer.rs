@@ -15,8 +15,7 @@ use crate::checkpoint::Checkpoint;
 use crate::config::TrainConfig;
 use crate::losses::{LossTerms, loss};
 use crate::optim::{Adam, load_parameters, parameters_host};
-pub use crate::pipeline::read;
-use crate::pipeline::{Outputs, TrainingView, forward};
+use crate::pipeline::{Outputs, TrainingView, forward, read};
 
 /// Non-finite losses tolerated in one run before giving up.
 pub const MAX_NON_FINITE: usize = 8;

@@ -20,9 +20,10 @@ use crate::config::TrainConfig;
 use crate::evaluate::{Avatar, fit_synthetic_view, hand_image, move_light, render_geometry};
 use crate::lpips::LpipsVgg;
 use crate::metrics::{TextureErrors, image_metrics, texture_errors};
+use crate::pipeline::read;
 use crate::real::{RealScene, RealView, hand_masks};
 use crate::run::synthetic_trainer;
-use crate::trainer::{Observer, Trainer, read};
+use crate::trainer::{Observer, Trainer};
 
 /// An avatar to score: compact textures and a light in the training camera's frame.
 struct Candidate {

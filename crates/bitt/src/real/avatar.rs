@@ -12,7 +12,7 @@ use super::{RealInput, load_models};
 use crate::BittError;
 use crate::assets::{HandAssets, ViewGeometry};
 use crate::config::TrainConfig;
-use crate::trainer::read;
+use crate::pipeline::read;
 
 /// A real run's avatar read back from its folder (no networks needed).
 #[derive(Debug, Clone)]

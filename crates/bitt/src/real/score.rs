@@ -9,7 +9,8 @@ use burn::tensor::Tensor;
 use super::{RealScene, RealView};
 use crate::BittError;
 use crate::assets::ViewGeometry;
-use crate::trainer::{Trainer, read};
+use crate::pipeline::read;
+use crate::trainer::Trainer;
 
 /// Scores of a real multi-view scene against its photographs (hands masked by the given
 /// meshes' silhouettes, as the reference's `masked_img`).
