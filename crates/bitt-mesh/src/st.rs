@@ -18,9 +18,15 @@ use crate::{FileError, MeshError};
 /// One tensor to write: name, dtype, shape, little-endian bytes.
 pub type Entry = (String, Dtype, Vec<usize>, Vec<u8>);
 
-/// The value a `U8` entry of [`unit_entry`] stands for.
-fn from_unit_byte(k: u8) -> f32 {
+/// The value a `U8` entry of [`unit_entry`] stands for: `k / 255`.
+pub fn from_unit_byte(k: u8) -> f32 {
     f32::from(k) / 255.0
+}
+
+/// The byte an 8-bit image stores for `v`: clamped to [0, 1], times 255, rounded.
+/// `from_unit_byte(unit_byte(v))` is exactly what [`unit_entry`] keeps as a byte.
+pub fn unit_byte(v: f32) -> u8 {
+    (v.clamp(0.0, 1.0) * 255.0).round() as u8
 }
 
 /// `values` (of `shape`) as an entry that is 4x smaller where it can be: `U8` holding
@@ -446,6 +452,12 @@ mod tests {
     fn unit_values_shrink_to_bytes_only_when_exact() {
         let path = Path::new("x.safetensors");
         let image: Vec<f32> = (0..=255u8).map(|k| f32::from(k) / 255.0).collect();
+        // An image made 8-bit by `unit_byte` is kept as bytes, every value.
+        assert!((0..=255u8).all(|k| unit_byte(from_unit_byte(k)) == k));
+        assert_eq!(
+            (unit_byte(-0.2), unit_byte(1.7), unit_byte(0.5)),
+            (0, 255, 128)
+        );
         let mask = vec![0.0, 1.0, 1.0, 0.0];
         let entries = [
             unit_entry("image", vec![256], &image),

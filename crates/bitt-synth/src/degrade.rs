@@ -1,5 +1,6 @@
 //! Mild camera degradation of the training image: lens blur, sensor noise, JPEG.
 
+use bitt_mesh::st;
 use bitt_texture::procedural::noise::SplitMix64;
 use image::codecs::jpeg::JpegEncoder;
 use image::{ImageBuffer, Rgb};
@@ -98,7 +99,7 @@ fn blur(image: &[f32], size: usize, sigma: f64) -> Vec<f32> {
 pub fn to_8bit(image: &[f32]) -> Vec<f32> {
     image
         .iter()
-        .map(|&v| f32::from((v.clamp(0.0, 1.0) * 255.0).round() as u8) / 255.0)
+        .map(|&v| st::from_unit_byte(st::unit_byte(v)))
         .collect()
 }
 
@@ -108,7 +109,7 @@ fn jpeg(image: &[f32], size: usize, quality: u8) -> Result<Vec<f32>, SynthError>
     let mut px = Vec::with_capacity(3 * hw);
     for p in 0..hw {
         for c in 0..3 {
-            px.push((image[c * hw + p].clamp(0.0, 1.0) * 255.0).round() as u8);
+            px.push(st::unit_byte(image[c * hw + p]));
         }
     }
     let side = u32::try_from(size).map_err(|_| SynthError::Generate("image too large".into()))?;
@@ -125,7 +126,7 @@ fn jpeg(image: &[f32], size: usize, quality: u8) -> Result<Vec<f32>, SynthError>
     let mut out = vec![0.0f32; 3 * hw];
     for (p, rgb) in raw.chunks_exact(3).enumerate().take(hw) {
         for c in 0..3 {
-            out[c * hw + p] = f32::from(rgb[c]) / 255.0;
+            out[c * hw + p] = st::from_unit_byte(rgb[c]);
         }
     }
     Ok(out)
