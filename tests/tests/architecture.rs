@@ -242,6 +242,53 @@ fn module_circles(src: &Path) -> Vec<Vec<Vec<String>>> {
     circles(&graph)
 }
 
+/// Circles between a crate's top-level modules (a folder such as `real/` counts as one
+/// module with everything below it), which [`module_circles`] cannot see when they pass
+/// through different files of a folder.
+fn top_level_circles(src: &Path) -> Vec<Vec<Vec<String>>> {
+    let files = rust_files(src);
+    let modules: BTreeSet<Vec<String>> = files.iter().map(|f| module_of(src, f)).collect();
+    let top = |m: &[String]| m.first().map(|s| vec![s.clone()]).unwrap_or_default();
+    let mut graph: BTreeMap<Vec<String>, BTreeSet<Vec<String>>> =
+        modules.iter().map(|m| (top(m), BTreeSet::new())).collect();
+    for file in &files {
+        let module = module_of(src, file);
+        let text = std::fs::read_to_string(file).unwrap();
+        for path in references(&module, &code(&text)) {
+            let target = (1..=path.len())
+                .rev()
+                .map(|k| path[..k].to_vec())
+                .find(|p| modules.contains(p));
+            let Some(target) = target else { continue };
+            let (from, to) = (top(&module), top(&target));
+            if !from.is_empty() && !to.is_empty() && from != to {
+                graph.get_mut(&from).unwrap().insert(to);
+            }
+        }
+    }
+    circles(&graph)
+}
+
+#[test]
+fn no_crate_has_folder_circles() {
+    let mut all = Vec::new();
+    for name in crates()
+        .into_iter()
+        .chain(["../xtask".into(), "../tests".into()])
+    {
+        let src = root().join("crates").join(&name).join("src");
+        for circle in top_level_circles(&src) {
+            let names: Vec<String> = circle.iter().map(|m| m.join("::")).collect();
+            all.push(format!("{name}: {}", names.join(" -> ")));
+        }
+    }
+    assert!(
+        all.is_empty(),
+        "top-level module circles:\n{}",
+        all.join("\n")
+    );
+}
+
 #[test]
 fn no_crate_has_module_circles() {
     let mut all = Vec::new();

@@ -316,6 +316,7 @@ fn annotation_run_trains_resumes_and_renders_in_other_poses() {
         &avatar.fine,
         &avatar.input.train.hands,
         &light,
+        avatar.config.loss.photo_occlusion,
         &host,
     )
     .unwrap();
@@ -334,7 +335,15 @@ fn annotation_run_trains_resumes_and_renders_in_other_poses() {
     let betas = vec![0.0; 10];
     let proc_pose = procedural_pose(&models, family, [&betas, &betas], 1, 32).unwrap();
     for hands in [pose, orbit_hands(&proc_pose, &models, 0.6, 0.2).unwrap()] {
-        let img = render_textures(&assets, &avatar.fine, &hands, &light, &host).unwrap();
+        let img = render_textures(
+            &assets,
+            &avatar.fine,
+            &hands,
+            &light,
+            avatar.config.loss.photo_occlusion,
+            &host,
+        )
+        .unwrap();
         let lit = img.iter().filter(|&&v| v > 0.0).count();
         assert!(lit > 50, "only {lit} lit values");
     }
@@ -458,6 +467,7 @@ fn demo_frame_trains_with_procedural_hands_if_present() {
                 &avatar.fine,
                 &pose,
                 &avatar.light,
+                setup.trainer.config.loss.photo_occlusion,
                 &Device::flex(),
             )
             .unwrap();

@@ -9,8 +9,8 @@ use std::time::Instant;
 
 use anyhow::{Result, bail};
 use bitt::config_files::refine_config;
+use bitt::files;
 use bitt::progress::{SetupLines, TrainBar};
-use bitt::run::files;
 use bitt::run_folder::{check_utf8_paths, fresh_out, remove_checkpoints};
 use bitt::train_scene::{
     FreshRequest, KeypointInput, SceneInput, finish_run, resumed_run, start_fresh, summary_lines,

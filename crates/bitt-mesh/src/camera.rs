@@ -387,6 +387,18 @@ impl PixelBox {
     }
 }
 
+/// `camera` orbited about `center` (a point in `camera`'s frame): turned by `yaw` radians
+/// about the camera's vertical axis and `pitch` about its horizontal axis, so it sees the
+/// same hands from another side (a turntable view).
+pub fn orbit_camera(camera: &PinholeCamera, center: DVec3, yaw: f64, pitch: f64) -> PinholeCamera {
+    let turn = DMat3::from_rotation_x(pitch) * DMat3::from_rotation_y(yaw);
+    PinholeCamera {
+        rotation: turn * camera.rotation,
+        translation: turn * (camera.translation - center) + center,
+        ..*camera
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

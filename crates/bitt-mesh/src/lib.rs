@@ -9,6 +9,7 @@
 //! - [`interhand`]: the InterHand2.6M dataset reader and the paper's scene selection.
 //! - [`keypoints`]: 2D hand keypoints from OpenPose, MediaPipe and a plain JSON format.
 //! - [`light`]: the scene light's 12 values and the `--light` text.
+//! - [`occlusion`]: ambient occlusion of posed meshes by shadow rays.
 //! - [`export`]: OBJ and glTF 2.0 binary writers.
 //!
 //! This crate knows nothing of tensors, networks or textures beyond a UV layout, and never
@@ -24,6 +25,7 @@ pub mod lbs;
 pub mod light;
 pub mod mano;
 pub mod model;
+pub mod occlusion;
 pub mod procedural;
 pub mod st;
 

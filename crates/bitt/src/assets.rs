@@ -119,8 +119,20 @@ pub struct ViewGeometry {
     /// The hands' parameters and camera the vertices were posed from, when they were (not
     /// for a view made from vertices alone).
     pub hands: Option<TwoHandScene>,
+    /// The hands' light visibility (see [`ViewGeometry::with_occlusion`]), when shaded with
+    /// it.
+    occlusion: Option<Occlusion>,
     /// The render geometry made so far (see the type's docs).
     cache: GeometryCache,
+}
+
+/// The light visibility of a view's vertices: `1 - strength (1 - ao)` per vertex, with `ao`
+/// the ambient occlusion of both hands together.
+#[derive(Debug, Clone)]
+struct Occlusion {
+    strength: f64,
+    /// Left then right hand's vertices.
+    factors: Arc<Vec<f32>>,
 }
 
 /// What identifies a [`SceneGeometry`] of one view: depth range, antialiasing, texture side,
@@ -180,8 +192,81 @@ impl ViewGeometry {
             vertices_host,
             vertices,
             hands: None,
+            occlusion: None,
             cache: GeometryCache::default(),
         }
+    }
+
+    /// The same view shaded with ambient occlusion: every pixel's shaded colour is scaled by
+    /// `1 - strength (1 - ao)`, with `ao` the fraction of its hemisphere from which light
+    /// reaches the surface past both hands ([`bitt_mesh::occlusion`], interpolated from the
+    /// vertices). Creases, the slits between touching fingers and a palm pressed against the
+    /// other hand are shaded darker, as they are in a photo, instead of being painted dark
+    /// into the albedo. `strength` 0 gives the paper's Phong shading.
+    ///
+    /// # Errors
+    /// A strength outside `[0, 1]`, or vertices the rays cannot be cast over.
+    pub fn with_occlusion(mut self, assets: &HandAssets, strength: f64) -> Result<Self, BittError> {
+        if !(0.0..=1.0).contains(&strength) {
+            return Err(BittError::Invalid(format!(
+                "the occlusion strength must lie in [0, 1], not {strength}"
+            )));
+        }
+        self.cache = GeometryCache::default();
+        if strength == 0.0 {
+            self.occlusion = None;
+            return Ok(self);
+        }
+        let ao = self.vertex_occlusion(assets)?;
+        let factors = ao
+            .iter()
+            .flatten()
+            .map(|&a| (1.0 - strength * (1.0 - f64::from(a))) as f32)
+            .collect();
+        self.occlusion = Some(Occlusion {
+            strength,
+            factors: Arc::new(factors),
+        });
+        Ok(self)
+    }
+
+    /// The ambient occlusion of this view's hands (both together, full strength) at every
+    /// texel, left then right: 1 where the texel's whole hemisphere is open, lower in creases
+    /// and where the hands press together.
+    ///
+    /// # Errors
+    /// Vertices the rays cannot be cast over.
+    pub fn texel_occlusion(&self, assets: &HandAssets) -> Result<[Vec<f32>; 2], BittError> {
+        let ao = self.vertex_occlusion(assets)?;
+        Ok([
+            assets.surfaces[0].values(&ao[0])?,
+            assets.surfaces[1].values(&ao[1])?,
+        ])
+    }
+
+    /// The ambient occlusion of both hands' vertices, left then right.
+    fn vertex_occlusion(&self, assets: &HandAssets) -> Result<Vec<Vec<f32>>, BittError> {
+        let faces = [0, 1].map(|i| assets.meshes[i].topology.faces());
+        let meshes = [0, 1].map(|i| bitt_mesh::occlusion::OccluderMesh {
+            vertices: &self.vertices_host[i],
+            faces: faces[i],
+        });
+        Ok(bitt_mesh::occlusion::ambient_occlusion(
+            &meshes,
+            &bitt_mesh::occlusion::OcclusionSettings::default(),
+        )?)
+    }
+
+    /// The strength this view is shaded with ambient occlusion ([`ViewGeometry::with_occlusion`];
+    /// 0: none).
+    pub fn occlusion_strength(&self) -> f64 {
+        self.occlusion.as_ref().map_or(0.0, |o| o.strength)
+    }
+
+    /// Per vertex of both hands (left then right), the factor its shading is scaled by
+    /// ([`ViewGeometry::with_occlusion`]); `None` without occlusion.
+    pub fn occlusion_factors(&self) -> Option<&[f32]> {
+        self.occlusion.as_ref().map(|o| o.factors.as_slice())
     }
 
     /// The render geometry of this view for `settings`, square textures of side
@@ -201,9 +286,17 @@ impl ViewGeometry {
         if let Some((_, g)) = cache.iter().find(|(k, _)| *k == key) {
             return Ok(g.clone());
         }
-        let g = Arc::new(SceneGeometry::with_path(
+        let occlusion = self.occlusion.as_ref().map(|o| {
+            let n = o.factors.len();
+            Tensor::<2>::from_data(
+                TensorData::new(o.factors.to_vec(), [n, 1]),
+                &self.vertices[0].device(),
+            )
+        });
+        let g = Arc::new(SceneGeometry::with_occlusion(
             &assets.scene,
             &self.vertices,
+            occlusion,
             &self.camera,
             settings,
             &[[texture_size; 2]; 2],

@@ -87,7 +87,7 @@ fn name_photo(e: DetectError, image: &Path) -> DetectError {
 /// A missing or unreadable photo, or one that is not an image (naming it), a photo too small
 /// to hold a hand, unusable built-in weights.
 pub fn detect_photo(image: &Path, device: &Device) -> Result<PhotoDetection, BittError> {
-    crate::real::require_image(image)?;
+    crate::input::require_image(image)?;
     let photo = bitt_texture::image_io::load_image(image)?;
     let rgb = rgb_image(&photo.data, photo.height, photo.width)?;
     let load = Instant::now();

@@ -57,6 +57,43 @@ pub fn max_hsv_saturation(texture: &[f32]) -> f32 {
         .fold(0.0, f32::max)
 }
 
+/// Texels whose ambient occlusion is below this are "in shade" for [`albedo_in_shade`].
+pub const SHADE_OCCLUSION: f32 = 0.6;
+/// Texels whose ambient occlusion is above this are "open" for [`albedo_in_shade`].
+pub const OPEN_OCCLUSION: f32 = 0.9;
+
+/// How much darker an albedo is in shade than in the open: over the texels `visible` per
+/// hand, the mean luminance (Rec. 709) of `textures` (`[3, T]` per hand) on the texels
+/// whose ambient occlusion `ao` is below [`SHADE_OCCLUSION`] divided by that on the texels
+/// whose ambient occlusion is above [`OPEN_OCCLUSION`]. An albedo with a photo's crease
+/// shadows painted into it reads well below 1; skin of one colour reads 1. `None` when
+/// either class has fewer than 20 texels.
+pub fn albedo_in_shade(
+    textures: &[Vec<f32>; 2],
+    visible: &[Vec<bool>; 2],
+    ao: &[Vec<f32>; 2],
+) -> Option<f64> {
+    let (mut shade, mut open) = ((0.0f64, 0usize), (0.0f64, 0usize));
+    for h in 0..2 {
+        let t = textures[h].len() / 3;
+        for i in (0..t).filter(|&i| visible[h].get(i) == Some(&true)) {
+            let (tex, a) = (&textures[h], ao[h].get(i).copied().unwrap_or(1.0));
+            let lum = 0.2126 * tex[i] + 0.7152 * tex[t + i] + 0.0722 * tex[2 * t + i];
+            let class = if a < SHADE_OCCLUSION {
+                &mut shade
+            } else if a > OPEN_OCCLUSION {
+                &mut open
+            } else {
+                continue;
+            };
+            class.0 += f64::from(lum);
+            class.1 += 1;
+        }
+    }
+    (shade.1 >= 20 && open.1 >= 20 && open.0 > 0.0)
+        .then(|| (shade.0 / shade.1 as f64) / (open.0 / open.1 as f64))
+}
+
 /// Replaces each texel of `fine` (`[3, T]`) whose HSV saturation, as it is or rounded to 8
 /// bits, is above [`MAX_SKIN_SATURATION`] with the same texel of `coarse` (the texture
 /// prior's); returns how many were replaced. The avatar's fine textures pass through it, so
@@ -162,7 +199,7 @@ pub fn render_view(
     light: &LightValues,
 ) -> Result<Vec<f32>, BittError> {
     let device = trainer.view.image.device().inner();
-    let geometry = ViewGeometry::new(&trainer.assets, scene, &device)?;
+    let geometry = trainer.view_geometry(scene, &device)?;
     render_geometry(trainer, &geometry, textures, &light.to_light(&device))
 }
 
@@ -185,6 +222,27 @@ pub fn render_geometry(
         &trainer.settings,
     )?;
     read(r.image)
+}
+
+/// Means of fine and coarse metrics over several views.
+#[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
+pub struct MeanScore {
+    /// BiTT (fine).
+    pub fine: ImageMetrics,
+    /// Coarse stage.
+    pub coarse: ImageMetrics,
+    /// Views averaged.
+    pub count: usize,
+}
+
+pub fn mean_score(scores: &[ViewScore]) -> Option<MeanScore> {
+    let fine: Vec<ImageMetrics> = scores.iter().map(|s| s.fine).collect();
+    let coarse: Vec<ImageMetrics> = scores.iter().map(|s| s.coarse).collect();
+    Some(MeanScore {
+        fine: mean_metrics(&fine)?,
+        coarse: mean_metrics(&coarse)?,
+        count: scores.len(),
+    })
 }
 
 /// Metrics of the fine and coarse renders of one ground-truth view.
@@ -233,7 +291,7 @@ pub fn score_view(
     gt_masks: &[Vec<f32>; 2],
 ) -> Result<(ViewScore, Vec<f32>, Vec<f32>), BittError> {
     let device = trainer.view.image.device().inner();
-    let geometry = ViewGeometry::new(&trainer.assets, scene, &device)?;
+    let geometry = trainer.view_geometry(scene, &device)?;
     let light = avatar.light_for(&scene.camera).to_light(&device);
     let fine = render_geometry(trainer, &geometry, &avatar.fine, &light)?;
     let coarse = render_geometry(trainer, &geometry, &avatar.coarse, &light)?;
@@ -320,6 +378,32 @@ pub fn score_textures(avatar: &Avatar, gt: &[Vec<f32>; 2]) -> TextureScore {
 mod tests {
     use super::*;
     use bitt_mesh::glam::DMat3;
+
+    /// A texture darkened where the occlusion is low reads below 1, by the darkening; one
+    /// colour reads 1; hidden texels do not count, and too few texels in a class give none.
+    #[test]
+    fn albedo_in_shade_reads_the_darkening_of_shaded_texels() {
+        let t = 100;
+        let ao: Vec<f32> = (0..t).map(|i| if i < 40 { 0.3 } else { 0.95 }).collect();
+        let texture = |shade: f32| -> Vec<f32> {
+            (0..3 * t)
+                .map(|k| if k % t < 40 { 0.6 * shade } else { 0.6 })
+                .collect()
+        };
+        let visible = [vec![true; t], vec![false; t]];
+        let ao = [ao.clone(), ao];
+        let flat = [texture(1.0), texture(0.1)];
+        let r = albedo_in_shade(&flat, &visible, &ao).unwrap();
+        assert!(
+            (r - 1.0).abs() < 1e-6,
+            "{r}: the hidden right hand must not count"
+        );
+        let baked = [texture(0.5), texture(0.5)];
+        let r = albedo_in_shade(&baked, &visible, &ao).unwrap();
+        assert!((r - 0.5).abs() < 1e-6, "{r}");
+        let few = [(0..t).map(|i| i < 10).collect(), vec![false; t]];
+        assert_eq!(albedo_in_shade(&baked, &few, &ao), None);
+    }
 
     /// Texel classes: visible, invisible, of which usable by symmetry or hidden on both.
     #[test]

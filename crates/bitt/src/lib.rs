@@ -5,7 +5,8 @@
 //! - [`config_files`]: the configuration files the commands take (training, refinement, fit).
 //! - [`assets`]: hand models, render meshes, texture layouts; one view's geometry.
 //! - [`demo`]: the built-in two-hand demo scene (procedural or any other hands).
-//! - [`input`]: cropping and resizing input images to the preset's size.
+//! - [`input`]: what a run is given: hand and prior sources, photos read and checked against
+//!   their hands, cropped and resized to the preset's size.
 //! - [`pipeline`]: the forward pass (scene estimation, coarse stage, fine stage).
 //! - [`losses`]: the paper's loss (eq. 6-10).
 //! - [`optim`], [`checkpoint`], [`trainer`]: Adam, checkpoints, the per-scene trainer.
@@ -15,6 +16,7 @@
 //!   [`lpips_convert`] writes its weights file from the torch checkpoints.
 //! - [`train_scene`]: a run's setup (fresh or resumed) and its results, for `train-scene`.
 //! - [`outputs`], [`run`]: the run folder (textures, renders, avatar, metrics, report);
+//!   [`files`]: its file names and the readers of a finished run's textures and light;
 //!   [`run_folder`]: where a new run may go, its first files, a resumed run's checkpoints.
 //! - [`avatar_export`]: the avatar files: rigged `avatar.glb`, `avatar_static.glb`, OBJ.
 //! - [`saved`]: a trained run read back from its folder (either kind), for re-rendering and
@@ -26,8 +28,9 @@
 //!   a grid of orthographic views).
 //! - [`figure_inputs`]: what the figures are made of, read and checked (light, UV layouts,
 //!   images, procedural skin textures).
-//! - [`texture_model`]: `bitt texture`'s texture PCA model (a file or the procedural fit),
-//!   its parameters and the UV texture it makes.
+//! - [`texture_model`]: a run's procedural texture prior (fitted once, cached) and `bitt
+//!   texture`'s texture PCA model (a file or the procedural fit), its parameters and the UV
+//!   texture it makes.
 //! - [`plot`]: the loss plot (`loss.png`: axes, decade ticks, legend, learning-rate steps).
 //! - [`progress`]: progress on stderr (training, evaluation, refinement, keypoint fit, PCA fit,
 //!   a run's setup): a bar redrawn on a terminal, a plain line every 10 % in a log.
@@ -37,7 +40,7 @@
 //! - [`detect`]: both hands found in a photo by the built-in detector (`bitt-detect`), the
 //!   detection's files and overlay (`bitt detect-hands`, the photo-only path).
 //! - [`fit`]: both hands fitted to 2D keypoints (OpenPose, MediaPipe, plain JSON).
-//! - [`real`]: real data (an image + annotation pickle, InterHand2.6M scenes), real runs.
+//! - [`real`]: real runs (an image + annotation pickle, InterHand2.6M scenes, keypoints).
 //! - [`backend_check`], [`nets_bench`], [`gpu_check`]: a fixed computation to compare
 //!   backends, the network benches, and `bitt gpu-check` (every GPU check in one report);
 //!   [`net_shapes`]: the networks' parameter counts and shapes (`bitt nets`).
@@ -56,6 +59,7 @@ mod error;
 pub mod evaluate;
 pub mod figure;
 pub mod figure_inputs;
+pub mod files;
 pub mod fit;
 pub mod gpu_check;
 pub mod hand_layer;

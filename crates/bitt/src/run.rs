@@ -9,14 +9,17 @@ use bitt_mesh::glam::{DMat3, DVec3};
 use bitt_mesh::{PinholeCamera, TwoHandScene, procedural_pair, st};
 use bitt_render::scene::LightValues;
 use bitt_synth::SynthScene;
-use bitt_texture::{FitProgress, NoProgress, TexturePca, procedural_texture_model};
+use bitt_texture::TexturePca;
 use burn::tensor::Device;
 
 use crate::BittError;
 use crate::assets::{HandAssets, ViewGeometry};
 use crate::avatar_export::AvatarFiles;
 use crate::config::TrainConfig;
-use crate::evaluate::{Avatar, TextureScore, ViewScore, mean_metrics, score_textures, score_view};
+use crate::evaluate::{
+    Avatar, MeanScore, TextureScore, ViewScore, mean_score, score_textures, score_view,
+};
+use crate::files;
 use crate::input::ImageInput;
 use crate::metrics::{ImageMetrics, image_metrics};
 use crate::outputs::{
@@ -31,41 +34,6 @@ type PngSink<'a> = dyn FnMut(&str, PathBuf, &[f32], usize, usize) -> Result<(), 
 
 /// A scored view: scores, fine render, coarse render, ground-truth hand image.
 type Scored = (ViewScore, Vec<f32>, Vec<f32>, Vec<f32>);
-
-/// Names of the files of a run folder.
-pub mod files {
-    /// The resolved configuration.
-    pub const CONFIG: &str = "config.json";
-    /// The latest checkpoint.
-    pub const CHECKPOINT: &str = "checkpoint.safetensors";
-    /// The checkpoint before it (see [`crate::trainer::previous_checkpoint_path`]).
-    pub const CHECKPOINT_PREVIOUS: &str = "checkpoint.previous.safetensors";
-    /// Metrics and loss history: the same bytes for a resumed run as for an uninterrupted
-    /// one (no timings; those are in [`TIMING`]).
-    pub const METRICS: &str = "metrics.json";
-    /// How long training took (seconds, iterations).
-    pub const TIMING: &str = "timing.json";
-    /// The estimated light.
-    pub const LIGHT: &str = "light.json";
-    /// The report.
-    pub const REPORT: &str = "report.html";
-    /// The avatar.
-    pub const AVATAR: &str = "avatar.glb";
-    /// The per-hand avatars for WebXR hand tracking (`left.glb`, `right.glb`, `xr.html`).
-    pub const XR: &str = "xr";
-    /// Loss curves.
-    pub const LOSS_PLOT: &str = "loss.png";
-    /// The scene a run was trained on (synthetic runs), to resume without the generator.
-    pub const SCENE: &str = "scene";
-    /// The mesh refinement's report (`train-scene --refine-mesh`, `bitt refine-hands`).
-    pub const REFINE: &str = "refine.json";
-    /// The photo with the mesh outlines before (red) and after (green) refinement.
-    pub const REFINE_OVERLAY: &str = "overlay.png";
-    /// Scores of a real multi-view run against the photographs of its novel views and poses.
-    pub const REAL_SCORES: &str = "real_scores.json";
-    /// The trained textures and light parameters (what `render-avatar` and `export` read).
-    pub const TEXTURES: &str = "textures/textures.safetensors";
-}
 
 /// Writes a real run's scores ([`crate::real::score_real`]) to [`files::REAL_SCORES`].
 pub fn write_real_scores(out: &Path, scores: &crate::real::RealScores) -> Result<(), BittError> {
@@ -131,63 +99,6 @@ fn read_refinement(dir: &Path) -> Result<Option<serde_json::Value>, BittError> {
     crate::outputs::read_json_if_present(&dir.join(files::REFINE))
 }
 
-/// The texture PCA of `config.texture`, read from `cache_dir` when fitted before, else fitted
-/// (seconds at `quick`, minutes at `paper`) and cached there.
-pub fn texture_prior(
-    config: &TrainConfig,
-    cache_dir: Option<&Path>,
-    device: &Device,
-) -> Result<TexturePca, BittError> {
-    texture_prior_with_progress(config, cache_dir, device, &NoProgress)
-}
-
-/// [`texture_prior`], reporting the fit's stages to `progress` (nothing is reported when the
-/// cache has the model).
-pub fn texture_prior_with_progress(
-    config: &TrainConfig,
-    cache_dir: Option<&Path>,
-    device: &Device,
-    progress: &dyn FitProgress,
-) -> Result<TexturePca, BittError> {
-    let key = {
-        // The PCA is fitted on skins generated over the procedural hand's surface: a change
-        // of that surface (the synthetic generator's version) changes the fit.
-        let text = format!(
-            "{}|{}",
-            serde_json::to_string(&config.texture).unwrap_or_default(),
-            bitt_synth::GENERATOR_VERSION
-        );
-        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-        for b in text.bytes() {
-            h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
-        }
-        format!("procedural-pca-{h:016x}.safetensors")
-    };
-    if let Some(dir) = cache_dir {
-        let path = dir.join(&key);
-        if path.is_file() {
-            // A corrupt entry, or one fitted on another layout of the procedural hands (a
-            // cache from before a change of their surface), is refitted and overwritten below.
-            if let Ok(p) = TexturePca::load_safetensors(&path) {
-                let assets = crate::assets::HandAssets::new(
-                    bitt_mesh::procedural_pair(),
-                    config.texture.resolution,
-                )?;
-                if assets.check_prior(&p).is_ok() {
-                    return Ok(p);
-                }
-            }
-        }
-    }
-    // The model alone: the held-out identities only serve `bitt texture`'s evaluation.
-    let (pca, _) = procedural_texture_model(&config.texture, device, progress)?;
-    if let Some(dir) = cache_dir {
-        std::fs::create_dir_all(dir).map_err(|e| BittError::io(dir, e))?;
-        pca.save_safetensors(&dir.join(key))?;
-    }
-    Ok(pca)
-}
-
 /// A trainer for a synthetic scene: the given (possibly noisy) meshes, the training image
 /// (cropped and resized when its size is not the preset's), the procedural hand models.
 pub fn synthetic_trainer(
@@ -238,27 +149,6 @@ pub struct SyntheticScores {
     pub texture: Option<TextureScore>,
 }
 
-/// Means of fine and coarse metrics over several views.
-#[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
-pub struct MeanScore {
-    /// BiTT (fine).
-    pub fine: ImageMetrics,
-    /// Coarse stage.
-    pub coarse: ImageMetrics,
-    /// Views averaged.
-    pub count: usize,
-}
-
-fn mean_score(scores: &[ViewScore]) -> Option<MeanScore> {
-    let fine: Vec<ImageMetrics> = scores.iter().map(|s| s.fine).collect();
-    let coarse: Vec<ImageMetrics> = scores.iter().map(|s| s.coarse).collect();
-    Some(MeanScore {
-        fine: mean_metrics(&fine)?,
-        coarse: mean_metrics(&coarse)?,
-        count: scores.len(),
-    })
-}
-
 /// What [`write_run`] measured, for the caller to print.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct RunSummary {
@@ -273,18 +163,6 @@ pub struct RunSummary {
     pub input_psnr: f64,
     /// Ground-truth scores (synthetic scenes).
     pub synthetic: Option<SyntheticScores>,
-}
-
-/// `camera` orbited about `center` (a point in `camera`'s frame): turned by `yaw` radians
-/// about the camera's vertical axis and `pitch` about its horizontal axis, so it sees the
-/// same hands from another side (a turntable view).
-pub fn orbit_camera(camera: &PinholeCamera, center: DVec3, yaw: f64, pitch: f64) -> PinholeCamera {
-    let turn = DMat3::from_rotation_x(pitch) * DMat3::from_rotation_y(yaw);
-    PinholeCamera {
-        rotation: turn * camera.rotation,
-        translation: turn * (camera.translation - center) + center,
-        ..*camera
-    }
 }
 
 /// The hands of a synthetic scene's novel poses, for the avatar's clip.
@@ -926,8 +804,8 @@ impl SavedAvatar {
         let text = std::fs::read_to_string(&path).map_err(|e| BittError::io(&path, e))?;
         let config = TrainConfig::from_json(&text, &path)?;
         let scene = SynthScene::read(&dir.join(files::SCENE))?;
-        let fine = Self::read_fine_textures(dir)?;
-        let light = Self::read_light(dir)?;
+        let fine = crate::files::read_fine_textures(dir)?;
+        let light = crate::files::read_light(dir)?;
         let camera = training_camera(&scene, &config)?;
         Ok(SavedAvatar {
             config,
@@ -1001,39 +879,13 @@ impl SavedAvatar {
         hands.camera = self.camera;
         let all = hands.camera_vertices(&procedural_pair())?;
         let center = all.iter().copied().sum::<DVec3>() / all.len().max(1) as f64;
-        hands.camera = orbit_camera(&self.camera, center, yaw, pitch);
+        hands.camera = bitt_mesh::camera::orbit_camera(&self.camera, center, yaw, pitch);
         Ok(hands)
     }
 }
 
 // ---------------------------------------------------------------------------------------------
-// Shared with real runs (`crate::real`): reading a run's textures and light, orbiting a view.
-
-impl SavedAvatar {
-    /// Reads the fine textures `[3, T]` (left, right) of a run's
-    /// `textures/textures.safetensors`.
-    pub fn read_fine_textures(dir: &Path) -> Result<[Vec<f32>; 2], BittError> {
-        let path = dir.join(files::TEXTURES);
-        let bytes = st::read_file(&path)?;
-        let r = st::Reader::open(&bytes, &path)?;
-        let texture = |name: &str| -> Result<Vec<f32>, BittError> {
-            Ok(r.finite_f32s(name, Some(&[Some(3), None]))?.1)
-        };
-        Ok([texture("left.fine")?, texture("right.fine")?])
-    }
-
-    /// Reads a run's `light.json` (the estimated light, training camera frame).
-    pub fn read_light(dir: &Path) -> Result<LightValues, BittError> {
-        let path = dir.join(files::LIGHT);
-        let text = std::fs::read_to_string(&path).map_err(|e| BittError::io(&path, e))?;
-        let light: LightValues = serde_json::from_str(&text)
-            .map_err(|e| BittError::corrupt(&path, format!("not a light: {e}")))?;
-        light
-            .validate()
-            .map_err(|e| BittError::corrupt(&path, e.to_string()))?;
-        Ok(light)
-    }
-}
+// Orbiting a view.
 
 /// A view's geometry seen from its camera orbited about `center` (camera frame) by `yaw` and
 /// `pitch` radians (as [`orbit_camera`]), with the orbited scene camera: the camera-frame
@@ -1051,7 +903,7 @@ pub fn orbit_geometry(
             .map(|p| turn * (p - center) + center)
             .collect::<Vec<_>>()
     });
-    let camera = orbit_camera(&geometry.scene_camera, center, yaw, pitch);
+    let camera = bitt_mesh::camera::orbit_camera(&geometry.scene_camera, center, yaw, pitch);
     (
         ViewGeometry::from_vertices(geometry.camera, camera, host, &device),
         camera,

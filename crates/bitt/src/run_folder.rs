@@ -10,10 +10,12 @@ use bitt_synth::SynthScene;
 
 use crate::BittError;
 use crate::checkpoint::Checkpoint;
+use crate::files;
+use crate::fit::FitOutput;
 use crate::outputs::{write_json, write_png};
 use crate::real::{RealInput, RealScene};
 use crate::refine::Refinement;
-use crate::run::{files, write_training_refinement};
+use crate::run::write_training_refinement;
 use crate::trainer::{Trainer, previous_checkpoint_path};
 
 /// What is wrong when run folder `dir` holds neither input record: `input.json` (a real
@@ -246,18 +248,6 @@ pub fn check_utf8_paths(paths: &[(&str, Option<&Path>)]) -> Result<(), BittError
         }
     }
     Ok(())
-}
-
-/// A keypoint fit to record in the run folder: [`FIT_RECORD`] and its overlay, and the
-/// detection its keypoints came from (a photo alone).
-#[derive(Debug, Clone)]
-pub struct FitOutput {
-    /// The record (`fit.json`).
-    pub record: serde_json::Value,
-    /// The overlay image `[3, H, W]` and its `[H, W]`.
-    pub overlay: (Vec<f32>, [usize; 2]),
-    /// The detection (`detection.json`, `keypoints.json`, `detection_overlay.png`).
-    pub detection: Option<crate::detect::DetectionFiles>,
 }
 
 /// Creates a fresh run's folder `out` and writes what it starts from: `config.json`, the

@@ -300,7 +300,14 @@ impl SavedRun {
     ) -> Result<Vec<f32>, BittError> {
         match self {
             SavedRun::Synthetic(a) => a.render(hands, Some(light), device),
-            SavedRun::Real(a, assets) => render_textures(assets, &a.fine, hands, light, device),
+            SavedRun::Real(a, assets) => render_textures(
+                assets,
+                &a.fine,
+                hands,
+                light,
+                a.config.loss.photo_occlusion,
+                device,
+            ),
         }
     }
 

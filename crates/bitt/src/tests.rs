@@ -7,7 +7,8 @@ use burn::tensor::Device;
 
 use crate::checkpoint::Checkpoint;
 use crate::optim::{load_parameters, parameters_host};
-use crate::run::{synthetic_trainer, texture_prior, write_run};
+use crate::run::{synthetic_trainer, write_run};
+use crate::texture_model::texture_prior;
 use crate::trainer::Silent;
 use crate::{BittError, TrainConfig};
 
@@ -751,4 +752,66 @@ fn a_cached_pca_of_another_layout_is_refitted() {
     let again = texture_prior(&config, Some(&dir), &Device::flex()).unwrap();
     assert_eq!(again.layout.num_texels(), fresh.layout.num_texels());
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Ambient occlusion shading (issue 34, shadows): a view shaded with it is nowhere brighter
+/// than without and darker where the hands crease or meet, by at most the strength; its
+/// factors lie in `[1 - strength, 1]`; novel views made by the trainer keep the training
+/// view's strength; a strength outside `[0, 1]` is refused.
+#[test]
+fn occlusion_darkens_creases_and_follows_the_training_view() {
+    let (config, scene, pca) = tiny();
+    let device = Device::flex().autodiff();
+    let mut t = synthetic_trainer(&scene, &config, &pca, &device).unwrap();
+    let host = Device::flex();
+    let textures = [
+        vec![0.7f32; 3 * t.assets.num_texels()],
+        vec![0.7f32; 3 * t.assets.num_texels()],
+    ];
+    let light = bitt_render::scene::LightValues::default();
+    let hands = t.view.geometry.hands.clone().expect("posed from hands");
+    let plain = crate::evaluate::render_view(&t, &hands, &textures, &light).unwrap();
+    assert_eq!(t.view.geometry.occlusion_strength(), 0.0);
+    let strength = 0.8;
+    t.view.geometry = t
+        .view
+        .geometry
+        .clone()
+        .with_occlusion(&t.assets, strength)
+        .unwrap();
+    let factors = t.view.geometry.occlusion_factors().unwrap().to_vec();
+    assert!(
+        factors
+            .iter()
+            .all(|&f| (1.0 - strength as f32 - 1e-6..=1.0).contains(&f))
+    );
+    let creased = factors.iter().filter(|&&f| f < 0.8).count();
+    assert!(creased > 20, "only {creased} vertices in shade");
+    let geometry = t.view_geometry(&hands, &host).unwrap();
+    assert_eq!(geometry.occlusion_strength(), strength);
+    let shaded = crate::evaluate::render_view(&t, &hands, &textures, &light).unwrap();
+    let mut darker = 0;
+    for (p, s) in plain.iter().zip(&shaded) {
+        assert!(*s <= p + 1e-5, "{s} brighter than {p}");
+        assert!(
+            *s >= (1.0 - strength as f32) * p - 1e-5,
+            "{s} below the floor of {p}"
+        );
+        darker += usize::from(*s < 0.95 * p);
+    }
+    assert!(darker > 10, "only {darker} values darker");
+    let ao = t.view.geometry.texel_occlusion(&t.assets).unwrap();
+    for hand in &ao {
+        assert_eq!(hand.len(), t.assets.num_texels());
+        assert!(hand.iter().all(|a| (0.0..=1.0 + 1e-6).contains(a)));
+        assert!(hand.iter().any(|&a| a < 0.6) && hand.iter().any(|&a| a > 0.9));
+    }
+    let e = t
+        .view
+        .geometry
+        .clone()
+        .with_occlusion(&t.assets, 1.5)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("occlusion strength"), "{e}");
 }

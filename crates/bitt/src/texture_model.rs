@@ -1,3 +1,4 @@
+//! The procedural texture prior of a run (fitted once per configuration, then cached), and
 //! `bitt texture`'s job: a texture PCA model, its parameters and the UV texture PNG they make.
 //!
 //! The model is HTML's `model.pkl`, a safetensors file, or the project's procedural skin model
@@ -8,11 +9,72 @@ use std::time::Instant;
 
 use bitt_texture::procedural::noise::SplitMix64;
 use bitt_texture::procedural::{ProceduralTextureConfig, procedural_texture_pca};
-use bitt_texture::{TexturePca, load_html_model, save_png8, save_png16};
+use bitt_texture::{
+    FitProgress, NoProgress, TexturePca, load_html_model, procedural_texture_model, save_png8,
+    save_png16,
+};
 use burn::tensor::Device;
 
 use crate::BittError;
+use crate::config::TrainConfig;
 use crate::error::WithContext;
+
+/// The texture PCA of `config.texture`, read from `cache_dir` when fitted before, else fitted
+/// (seconds at `quick`, minutes at `paper`) and cached there.
+pub fn texture_prior(
+    config: &TrainConfig,
+    cache_dir: Option<&Path>,
+    device: &Device,
+) -> Result<TexturePca, BittError> {
+    texture_prior_with_progress(config, cache_dir, device, &NoProgress)
+}
+
+/// [`texture_prior`], reporting the fit's stages to `progress` (nothing is reported when the
+/// cache has the model).
+pub fn texture_prior_with_progress(
+    config: &TrainConfig,
+    cache_dir: Option<&Path>,
+    device: &Device,
+    progress: &dyn FitProgress,
+) -> Result<TexturePca, BittError> {
+    let key = {
+        // The PCA is fitted on skins generated over the procedural hand's surface: a change
+        // of that surface (the synthetic generator's version) changes the fit.
+        let text = format!(
+            "{}|{}",
+            serde_json::to_string(&config.texture).unwrap_or_default(),
+            bitt_synth::GENERATOR_VERSION
+        );
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        for b in text.bytes() {
+            h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+        }
+        format!("procedural-pca-{h:016x}.safetensors")
+    };
+    if let Some(dir) = cache_dir {
+        let path = dir.join(&key);
+        if path.is_file() {
+            // A corrupt entry, or one fitted on another layout of the procedural hands (a
+            // cache from before a change of their surface), is refitted and overwritten below.
+            if let Ok(p) = TexturePca::load_safetensors(&path) {
+                let assets = crate::assets::HandAssets::new(
+                    bitt_mesh::procedural_pair(),
+                    config.texture.resolution,
+                )?;
+                if assets.check_prior(&p).is_ok() {
+                    return Ok(p);
+                }
+            }
+        }
+    }
+    // The model alone: the held-out identities only serve `bitt texture`'s evaluation.
+    let (pca, _) = procedural_texture_model(&config.texture, device, progress)?;
+    if let Some(dir) = cache_dir {
+        std::fs::create_dir_all(dir).map_err(|e| BittError::io(dir, e))?;
+        pca.save_safetensors(&dir.join(key))?;
+    }
+    Ok(pca)
+}
 
 /// Standard normal numbers from a seed (SplitMix64 + Box-Muller), reproducible everywhere.
 pub fn normal_params(seed: u64, n: usize) -> Vec<f32> {

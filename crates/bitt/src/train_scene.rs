@@ -18,6 +18,8 @@ use crate::assets::HandAssets;
 use crate::config::TrainConfig;
 use crate::config_files::fit_config;
 use crate::error::WithContext;
+use crate::files;
+use crate::fit::FitOutput;
 use crate::fit::{
     FitObserver, KeypointSource, PhotoKeypoints, fit_keypoints, fit_photo, parse_intrinsics,
     record_synthetic_fit,
@@ -29,11 +31,11 @@ use crate::real::{
 use crate::refine::{
     MeshRefine, RefineConfig, RefineObserver, Refinement, pca_pose_notes, refine_synthetic,
 };
-use crate::run::{RunSummary, files, synthetic_trainer, texture_prior_with_progress, write_run};
+use crate::run::{RunSummary, synthetic_trainer, write_run};
 use crate::run_folder::{
-    FitOutput, RunInput, has_checkpoint, is_finished_run, load_checkpoints, missing_input,
-    write_fresh_run,
+    RunInput, has_checkpoint, is_finished_run, load_checkpoints, missing_input, write_fresh_run,
 };
+use crate::texture_model::texture_prior_with_progress;
 use crate::trainer::Trainer;
 
 /// What the setup of a run tells on the way: lines for the user, and progress displays for

@@ -10,7 +10,7 @@ use bitt_texture::{LayoutGather, TexturePca, TexturePcaTensors};
 use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::BittError;
-use crate::assets::HandAssets;
+use crate::assets::{HandAssets, ViewGeometry};
 use crate::checkpoint::Checkpoint;
 use crate::config::TrainConfig;
 use crate::losses::{LossTerms, loss};
@@ -513,6 +513,20 @@ impl Trainer {
             });
         }
         Ok(())
+    }
+
+    /// The geometry of `hands` (a novel view or pose) on `device`, shaded as the training
+    /// view is: with its ambient occlusion strength ([`ViewGeometry::with_occlusion`]).
+    ///
+    /// # Errors
+    /// Hands that cannot be posed, or vertices the occlusion rays cannot be cast over.
+    pub fn view_geometry(
+        &self,
+        hands: &bitt_mesh::TwoHandScene,
+        device: &Device,
+    ) -> Result<ViewGeometry, BittError> {
+        ViewGeometry::new(&self.assets, hands, device)?
+            .with_occlusion(&self.assets, self.view.geometry.occlusion_strength())
     }
 
     /// Seconds trained so far by the last `train` call's latest state.

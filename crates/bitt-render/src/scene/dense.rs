@@ -21,6 +21,8 @@ pub(super) struct DenseGeometry {
     normals: Tensor<2>,
     points: Tensor<2>,
     to_camera: Tensor<2>,
+    /// `[H W, 1]`: the light visibility of each pixel, when the geometry has one.
+    occlusion: Option<Tensor<2>>,
     /// Per mesh: `[H W, 1]` its visible pixels (1/0), and its texel footprints at every pixel.
     lookups: Vec<(Tensor<2>, TexturePlan)>,
 }
@@ -36,10 +38,11 @@ impl DenseGeometry {
     /// Builds the per-pixel tensors and the per-mesh masks `[H, W]` (1/0).
     ///
     /// # Shapes
-    /// all vertices `[V, 3]`, clip `[V, 4]`
+    /// all vertices `[V, 3]`, occlusion `[V, 1]`, clip `[V, 4]`
     pub(super) fn new(
         scene: &Scene,
         all: Tensor<2>,
+        occlusion: Option<Tensor<2>>,
         clip: Tensor<2>,
         dense: &DenseRaster,
         camera: &Camera,
@@ -63,6 +66,9 @@ impl DenseGeometry {
         let normals = vertex_normals(all.clone(), &scene.topology)?;
         let normals = fill_empty(interpolate_dense(normals, &raster)?, &empty);
         let points = interpolate_dense(all, &raster)?;
+        let occlusion = occlusion
+            .map(|o| interpolate_dense(o, &raster))
+            .transpose()?;
         let uvs: Vec<f32> = scene.uvs.iter().flatten().copied().collect();
         let uv_table = float_tensor(uvs, [scene.uvs.len(), 2], &device);
         let uv = interpolate_dense_with_faces(uv_table, &scene.uv_faces, &raster)?;
@@ -78,6 +84,7 @@ impl DenseGeometry {
                 normals,
                 points,
                 to_camera,
+                occlusion,
                 lookups,
             },
             masks,
@@ -124,6 +131,10 @@ impl DenseGeometry {
             light,
             material,
         );
+        let shaded = match &self.occlusion {
+            Some(o) => shaded * o.clone(),
+            None => shaded,
+        };
         let bg = float_tensor(background.to_vec(), [1, 3], &device).expand([n, 3]);
         Ok(shaded
             .mask_where(self.empty.clone(), bg)

@@ -84,6 +84,8 @@ struct PixelGeometry {
     normals: Tensor<2>,
     points: Tensor<2>,
     to_camera: Tensor<2>,
+    /// `[N, 1]`: the light visibility of each pixel, when the geometry has one.
+    occlusion: Option<Tensor<2>>,
     /// Per mesh with covered pixels: its texel footprints (rows of that mesh's pixels).
     lookups: Vec<(usize, TexturePlan)>,
     /// Restores the pixel order after sampling mesh by mesh.
@@ -129,7 +131,33 @@ impl SceneGeometry {
         texture_sizes: &[[usize; 2]],
         path: GeometryPath,
     ) -> Result<Self, RenderError> {
+        Self::with_occlusion(scene, vertices, None, camera, settings, texture_sizes, path)
+    }
+
+    /// [`SceneGeometry::with_path`] with a light visibility per vertex: `occlusion`
+    /// `[sum V, 1]` (all meshes' vertices in order, values in `[0, 1]`, e.g. ambient
+    /// occlusion) is interpolated over each pixel and scales its whole shaded colour, so a
+    /// crease or a palm pressed against the other hand is shaded darker than [`phong`]
+    /// alone would. `None`: every vertex fully lit.
+    ///
+    /// # Errors
+    /// As [`SceneGeometry::new`], and an `occlusion` of another shape.
+    pub fn with_occlusion(
+        scene: &Scene,
+        vertices: &[Tensor<2>],
+        occlusion: Option<Tensor<2>>,
+        camera: &Camera,
+        settings: &RenderSettings,
+        texture_sizes: &[[usize; 2]],
+        path: GeometryPath,
+    ) -> Result<Self, RenderError> {
         camera.validate()?;
+        if let Some(o) = &occlusion {
+            let want = scene.topology.num_vertices();
+            crate::ops::check_shape("occlusion", o.dims(), [Some(want), Some(1)], || {
+                format!("[V, 1] with V = {want} (all meshes' vertices)")
+            })?;
+        }
         let m = scene.num_meshes();
         crate::error::check_len("vertex tensors", vertices.len(), m)?;
         crate::error::check_len("texture sizes", texture_sizes.len(), m)?;
@@ -160,8 +188,15 @@ impl SceneGeometry {
             )?),
         };
         if let Some(dense) = dense {
-            let (pixels, masks) =
-                DenseGeometry::new(scene, all, clip.clone(), &dense, camera, texture_sizes)?;
+            let (pixels, masks) = DenseGeometry::new(
+                scene,
+                all,
+                occlusion,
+                clip.clone(),
+                &dense,
+                camera,
+                texture_sizes,
+            )?;
             let antialias = settings
                 .antialias
                 .then(|| AntialiasPlan::from_dense(&dense, clip.clone(), &scene.topology))
@@ -218,10 +253,12 @@ impl SceneGeometry {
                 inverse[row] = pos as i64;
             }
             let to_camera = camera.directions_to_camera(points.clone());
+            let occlusion = occlusion.map(|o| interpolate(o, &raster)).transpose()?;
             Pixels::Covered(PixelGeometry {
                 normals,
                 points,
                 to_camera,
+                occlusion,
                 lookups,
                 inverse: index_tensor(inverse, &device),
             })
@@ -322,6 +359,10 @@ impl SceneGeometry {
             light,
             material,
         );
+        let shaded = match &px.occlusion {
+            Some(o) => shaded * o.clone(),
+            None => shaded,
+        };
         let image = self.raster()?.to_image(shaded, &background);
         match &self.antialias {
             Some(plan) => plan.apply(image),

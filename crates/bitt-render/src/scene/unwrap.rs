@@ -101,6 +101,22 @@ impl TexelSurface {
         })
     }
 
+    /// Per-vertex values (e.g. ambient occlusion) interpolated at every texel.
+    ///
+    /// # Errors
+    /// A value count other than the mesh's vertex count.
+    pub fn values(&self, per_vertex: &[f32]) -> Result<Vec<f32>, RenderError> {
+        crate::error::check_len("per-vertex values", per_vertex.len(), self.num_vertices)?;
+        Ok(self
+            .texel_faces
+            .iter()
+            .map(|&(f, b)| {
+                let t = self.mesh_faces[f as usize];
+                (0..3).map(|k| per_vertex[t[k] as usize] * b[k]).sum()
+            })
+            .collect())
+    }
+
     /// Unit surface normals at the texels (interpolated area-weighted vertex normals).
     ///
     /// # Errors

@@ -156,3 +156,116 @@ fn cpu_backends_keep_the_covered_path() {
         assert!(readbacks >= 1, "{name}");
     }
 }
+
+/// A light visibility per vertex scales each pixel's shaded colour by its interpolated
+/// value: a constant one scales the whole image, and a varying one gives the same image on
+/// both paths, darker where the vertices are, and the same gradient to the textures as the
+/// plain image weighted by it.
+#[test]
+fn occlusion_scales_the_shading_on_both_paths() {
+    for (device_name, device) in bitt_testkit::devices() {
+        if device_name == "ndarray" {
+            continue;
+        }
+        let s = hand_scene(24);
+        let scene = Scene::new(&[&s.meshes[0], &s.meshes[1]]).unwrap();
+        let verts = [
+            vertex_tensor(&s.vertices[0], &device),
+            vertex_tensor(&s.vertices[1], &device),
+        ];
+        let nv = s.vertices[0].len() + s.vertices[1].len();
+        let texture = Tensor::<3>::full([3, 8, 8], 0.6, &device);
+        let textures = [texture.clone(), texture];
+        let light = LightValues::default();
+        let light = PointLight::from_tensor(Tensor::<1>::from_data(
+            TensorData::new(light.to_array().to_vec(), [12]),
+            &device,
+        ))
+        .unwrap();
+        let settings = RenderSettings {
+            antialias: false,
+            ..Default::default()
+        };
+        let shade = |occlusion: Option<Vec<f32>>, path: GeometryPath| {
+            let occlusion =
+                occlusion.map(|o| Tensor::<2>::from_data(TensorData::new(o, [nv, 1]), &device));
+            let g = SceneGeometry::with_occlusion(
+                &scene,
+                &verts,
+                occlusion,
+                &s.camera,
+                &settings,
+                &[[8, 8]; 2],
+                path,
+            )
+            .unwrap();
+            to_vec(
+                g.shade(&textures, &light, &settings.material, settings.background)
+                    .unwrap(),
+            )
+        };
+        for path in [GeometryPath::Covered, GeometryPath::Dense] {
+            let plain = shade(None, path);
+            let half = shade(Some(vec![0.5; nv]), path);
+            assert!(plain.iter().any(|&v| v > 0.1), "{device_name}: hands drawn");
+            for (p, h) in plain.iter().zip(&half) {
+                assert!(
+                    (0.5 * p - h).abs() < 1e-6,
+                    "{device_name} {path:?}: {p} vs {h}"
+                );
+            }
+        }
+        // The right hand's vertices half lit, the left's fully: the right hand's pixels
+        // halve, the left's stay.
+        let varying: Vec<f32> = (0..nv)
+            .map(|i| if i < s.vertices[0].len() { 1.0 } else { 0.5 })
+            .collect();
+        let covered = shade(Some(varying.clone()), GeometryPath::Covered);
+        let dense = shade(Some(varying), GeometryPath::Dense);
+        let plain = shade(None, GeometryPath::Covered);
+        let max = covered
+            .iter()
+            .zip(&dense)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f32::max);
+        assert!(max < 1e-5, "{device_name}: paths differ by {max}");
+        let (mut halved, mut kept) = (0, 0);
+        for (p, c) in plain.iter().zip(&covered) {
+            if *p > 0.05 {
+                if (0.5 * p - c).abs() < 1e-5 {
+                    halved += 1;
+                } else if (p - c).abs() < 1e-5 {
+                    kept += 1;
+                }
+            }
+        }
+        assert!(
+            halved > 30 && kept > 30,
+            "{device_name}: {halved} halved, {kept} kept"
+        );
+    }
+}
+
+/// An occlusion of the wrong length is refused, naming it.
+#[test]
+fn an_occlusion_of_the_wrong_size_is_named() {
+    let device = bitt_testkit::devices().remove(0).1;
+    let s = hand_scene(16);
+    let scene = Scene::new(&[&s.meshes[0], &s.meshes[1]]).unwrap();
+    let verts = [
+        vertex_tensor(&s.vertices[0], &device),
+        vertex_tensor(&s.vertices[1], &device),
+    ];
+    let e = SceneGeometry::with_occlusion(
+        &scene,
+        &verts,
+        Some(Tensor::<2>::ones([5, 1], &device)),
+        &s.camera,
+        &RenderSettings::default(),
+        &[[8, 8]; 2],
+        GeometryPath::Covered,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("occlusion"), "{e}");
+}

@@ -61,7 +61,7 @@ pub fn photos_markdown(
             100.0 * p.holes
         )
     };
-    for r in photo_results {
+    for &r in &photo_results {
         let names = r.photos.as_ref().expect("filtered");
         for (input, label) in [
             (true, format!("{0} -> {0} (input view)", names.train)),
@@ -82,6 +82,25 @@ pub fn photos_markdown(
                 }
             }
         }
+    }
+    let shade: Vec<String> = photo_results
+        .iter()
+        .flat_map(|r| {
+            let train = &r.photos.as_ref().expect("filtered").train;
+            r.methods.iter().filter_map(move |(method, scores)| {
+                let v = scores.photo?.albedo_in_shade?;
+                Some(format!("| {train} | {} | {v:.3} |\n", method.key()))
+            })
+        })
+        .collect();
+    if !shade.is_empty() {
+        md.push_str(
+            "\nAlbedo in shade: on the texels the training photo shows, the texture's mean \
+             luminance where the training pose's ambient occlusion is below 0.6 over that where \
+             it is above 0.9. Below 1: the photo's crease shadows went into the texture.\n\n\
+             | trained on | method | albedo in shade |\n|---|---|---|\n",
+        );
+        md.extend(shade);
     }
     if !consistency.is_empty() {
         md.push_str(

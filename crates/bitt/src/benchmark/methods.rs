@@ -62,7 +62,7 @@ impl Truth {
     ) -> Result<Self, BittError> {
         let prep = |v: &V| {
             let (gt, hands, photo) = truth(v)?;
-            let geometry = ViewGeometry::new(&trainer.assets, &hands, device)?;
+            let geometry = trainer.view_geometry(&hands, device)?;
             Ok::<_, BittError>(TruthView {
                 gt,
                 geometry,
@@ -184,9 +184,17 @@ fn score(
         poses.push(m);
         pose_photos.extend(photo);
     }
+    let shade = match input_photo {
+        Some(_) => {
+            let ao = truth.input.geometry.texel_occlusion(&trainer.assets)?;
+            crate::evaluate::albedo_in_shade(&c.textures, visible, &ao)
+        }
+        None => None,
+    };
     let photo = input_photo.map(|input_view| PhotoScores {
         input_view,
         novel_poses: mean_photo_metrics(&pose_photos),
+        albedo_in_shade: shade,
     });
     let texture: TextureErrors = gt_textures
         .map(|gt| texture_errors(&c.textures, gt, visible))

@@ -73,6 +73,12 @@ pub struct PhotoScores {
     pub input_view: PhotoMetrics,
     /// Mean over the other photos (novel poses).
     pub novel_poses: Option<PhotoMetrics>,
+    /// The method's albedo in shade against in the open, on the texels the training photo
+    /// shows ([`crate::evaluate::albedo_in_shade`], the training view's ambient occlusion):
+    /// below 1 where the photo's shadows went into the texture. `None` in results made
+    /// before it, or with too few texels in either class.
+    #[serde(default)]
+    pub albedo_in_shade: Option<f64>,
 }
 
 /// The mean of several [`PhotoMetrics`] (`None` for none).

@@ -29,7 +29,7 @@ use crate::lpips::LpipsVgg;
 use crate::real::{
     HandSource, PriorSource, RealScene, interhand_views, load_models, real_trainer, sources,
 };
-use crate::run::texture_prior_with_progress;
+use crate::texture_model::texture_prior_with_progress;
 use crate::trainer::Observer;
 
 /// What an evaluation tells on the way; its trainings report each iteration through

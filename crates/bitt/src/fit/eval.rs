@@ -9,12 +9,11 @@ use bitt_mesh::{PinholeCamera, Side, TwoHandScene, procedural_pair};
 use bitt_synth::SynthScene;
 use bitt_texture::procedural::noise::SplitMix64;
 
-use super::{KeypointFit, keypoint_overlay};
+use super::{FitOutput, KeypointFit, keypoint_overlay};
 use crate::BittError;
 use crate::assets::HandAssets;
 use crate::error::WithContext;
 use crate::hand_priors::{FLEXION_RANGE, flexion_angles, flexion_axes};
-use crate::run_folder::FitOutput;
 
 /// A keypoint fit of `scene`'s training view (seen by `camera`, with the keypoints `points`
 /// read from `keypoints`) as a run folder records it (`train-scene --scene DIR --keypoints

@@ -14,7 +14,7 @@ use crate::BittError;
 use crate::assets::HandAssets;
 use crate::config::TrainConfig;
 use crate::detect::{DetectionFiles, PhotoDetection};
-use crate::real::{HandSource, PriorSource, check_sources, load_models};
+use crate::input::{HandSource, PriorSource, check_sources, load_models};
 use crate::refine::{
     HANDS_JSON, PhotoRefinement, RefineConfig, RefineObserver, outlines, overlay_scale, read_mask,
     refine_photo_hands,
@@ -25,6 +25,18 @@ pub const FIT_JSON: &str = "fit.json";
 
 /// The un-mirrored photo a `fit-hands --mirrored` folder's `hands.json` is for.
 pub const UNMIRRORED_IMAGE: &str = "image.png";
+
+/// A keypoint fit to record in the run folder: [`crate::run_folder::FIT_RECORD`] and its overlay, and the
+/// detection its keypoints came from (a photo alone).
+#[derive(Debug, Clone)]
+pub struct FitOutput {
+    /// The record (`fit.json`).
+    pub record: serde_json::Value,
+    /// The overlay image `[3, H, W]` and its `[H, W]`.
+    pub overlay: (Vec<f32>, [usize; 2]),
+    /// The detection (`detection.json`, `keypoints.json`, `detection_overlay.png`).
+    pub detection: Option<crate::detect::DetectionFiles>,
+}
 
 /// Where the keypoints come from and how to read them.
 #[derive(Debug, Clone)]
@@ -195,7 +207,7 @@ pub fn fit_photo(
     check_sources(hands, prior)?;
     let (mut pixels, [h, w], mut points, mirrored, detection) = match keypoints {
         PhotoKeypoints::File(source) => {
-            crate::real::require_image(image)?;
+            crate::input::require_image(image)?;
             let photo = bitt_texture::image_io::load_image(image)?;
             let (w, h) = (photo.width, photo.height);
             let options = KeypointOptions {
@@ -261,7 +273,7 @@ pub fn fit_photo(
             models.clone(),
             prior,
             train,
-            crate::real::BITT_CROP_SIZE as usize,
+            bitt_mesh::annotation::BITT_CROP_SIZE as usize,
             refine_config,
             cache,
             device,
@@ -425,7 +437,7 @@ pub fn check_fit_out(out: &Path) -> Result<(), BittError> {
 const FIT_NAMES: [&str; 7] = [
     HANDS_JSON,
     UNMIRRORED_IMAGE,
-    crate::run::files::REFINE_OVERLAY,
+    crate::files::REFINE_OVERLAY,
     FIT_JSON,
     crate::detect::KEYPOINTS_JSON,
     crate::detect::DETECTION_OVERLAY,
@@ -453,7 +465,7 @@ pub fn write_fit_outputs(out: &Path, fit: &PhotoFit) -> Result<(), BittError> {
     }
     let [oh, ow] = fit.overlay.1;
     files.push((
-        crate::run::files::REFINE_OVERLAY.into(),
+        crate::files::REFINE_OVERLAY.into(),
         png_file_bytes(&fit.overlay.0, oh, ow)?,
     ));
     if let Some(d) = &fit.detection {

@@ -49,8 +49,8 @@ pub use eval::{
     synthetic_keypoints, write_fit_eval,
 };
 pub use jobs::{
-    FIT_JSON, KeypointSource, PhotoFit, PhotoKeypoints, UNMIRRORED_IMAGE, check_fit_out, fit_photo,
-    keypoint_overlay, parse_intrinsics, write_fit_outputs,
+    FIT_JSON, FitOutput, KeypointSource, PhotoFit, PhotoKeypoints, UNMIRRORED_IMAGE, check_fit_out,
+    fit_photo, keypoint_overlay, parse_intrinsics, write_fit_outputs,
 };
 
 /// Weights of the keypoint fit's loss terms.

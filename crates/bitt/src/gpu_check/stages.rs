@@ -20,7 +20,8 @@ use crate::figure::{FigureHand, FigureOptions, default_light, render_figure};
 use crate::figure_inputs::procedural_textures;
 use crate::nets_bench::{BenchedNet, bench_net};
 use crate::pipeline::read;
-use crate::run::{synthetic_trainer, texture_prior};
+use crate::run::synthetic_trainer;
+use crate::texture_model::texture_prior;
 
 /// Largest mean absolute difference of the demo render allowed between the device and the
 /// host (values in `[0, 1]`; `cargo xtask e2e` uses the same bound).

@@ -30,15 +30,15 @@ pub struct RealAvatar {
 impl RealAvatar {
     /// Reads `config.json`, `input.json`, `textures/textures.safetensors` and `light.json`.
     pub fn load(dir: &Path) -> Result<Self, BittError> {
-        let path = dir.join(crate::run::files::CONFIG);
+        let path = dir.join(crate::files::CONFIG);
         let text = std::fs::read_to_string(&path).map_err(|e| BittError::io(&path, e))?;
         let config = TrainConfig::from_json(&text, &path)?;
         let input = RealInput::read(dir)?;
         Ok(RealAvatar {
             config,
             input,
-            fine: crate::run::SavedAvatar::read_fine_textures(dir)?,
-            light: crate::run::SavedAvatar::read_light(dir)?,
+            fine: crate::files::read_fine_textures(dir)?,
+            light: crate::files::read_light(dir)?,
         })
     }
 
@@ -66,12 +66,15 @@ impl RealAvatar {
 }
 
 /// Renders compact textures `[3, T]` (left, right) on `hands` (camera included) under
-/// `light` (in that camera's frame): `[3, H, W]` on the host.
+/// `light` (in that camera's frame), shaded with ambient occlusion of `occlusion` strength
+/// (the run's `loss.photo_occlusion`; [`ViewGeometry::with_occlusion`]): `[3, H, W]` on the
+/// host.
 pub fn render_textures(
     assets: &HandAssets,
     textures: &[Vec<f32>; 2],
     hands: &TwoHandScene,
     light: &LightValues,
+    occlusion: f64,
     device: &Device,
 ) -> Result<Vec<f32>, BittError> {
     let t = assets.num_texels();
@@ -84,7 +87,7 @@ pub fn render_textures(
             )));
         }
     }
-    let geometry = ViewGeometry::new(assets, hands, device)?;
+    let geometry = ViewGeometry::new(assets, hands, device)?.with_occlusion(assets, occlusion)?;
     let tex = |v: &Vec<f32>| Tensor::<2>::from_data(TensorData::new(v.clone(), [3, t]), device);
     let r = geometry.render(
         assets,

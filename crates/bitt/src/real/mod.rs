@@ -53,44 +53,39 @@
 //!
 //! # Files
 //!
-//! - `prior.rs`: hand and prior sources, MANO / HTML loading, the configuration adapted to
-//!   the prior.
-//! - `view.rs`: photos read, checked against their hands, cropped and resized.
 //! - `setup.rs`: fresh runs (annotation, keypoint fit, InterHand2.6M scene) and trainers.
 //! - `record.rs`: `input.json` and `input/images.safetensors`, and resuming from them.
 //! - `score.rs`: scores at novel views and poses against the photographs.
 //! - `avatar.rs`: a saved real avatar and rendering textures on hands.
 //! - `pose.rs`: poses to render an avatar in.
 //!
-//! The crop box is [`crate::input`]'s; the PCA resampling is `bitt_texture::resample`.
-
-use std::path::{Path, PathBuf};
+//! The hand and prior sources, the photos read, checked against their hands, cropped and
+//! resized, and the crop box are [`crate::input`]'s (re-exported here); the PCA resampling
+//! is `bitt_texture::resample`.
 
 mod avatar;
 mod pose;
-mod prior;
 mod record;
 mod score;
 mod setup;
-mod view;
 
+pub use crate::input::{
+    HAND_DEPTH_RANGE_M, MIN_HAND_INSIDE, RealScene, RealView, annotation_view,
+    check_hand_placement, interhand_views, prepare_view, read_image, require_image,
+};
+pub use crate::input::{
+    HandSource, PriorSource, adapt_config_to_prior, attach_html_uvs, check_sources,
+    left_uv_from_right, load_html_prior, load_models, sources, texture_model,
+};
 pub use avatar::{RealAvatar, render_textures};
 pub use pose::{
     annotation_pose, orbit_hands, parse_pose_family, pose_family_names, procedural_pose,
-};
-pub use prior::{
-    HandSource, PriorSource, adapt_config_to_prior, attach_html_uvs, check_sources,
-    left_uv_from_right, load_html_prior, load_models, sources, texture_model,
 };
 pub use record::{INPUT_FORMAT, RealInput, RealSource, ViewRecord, files};
 pub use score::{RealScores, hand_masks, score_real, silhouettes};
 pub use setup::{
     RealRunSettings, RealSetup, annotation_setup, interhand_setup, keypoint_setup, real_trainer,
     refined_real_trainer,
-};
-pub use view::{
-    HAND_DEPTH_RANGE_M, MIN_HAND_INSIDE, RealScene, RealView, annotation_view,
-    check_hand_placement, interhand_views, prepare_view, read_image, require_image,
 };
 
 pub use crate::input::{REFERENCE_HAND_BOX_RATIO, hands_box, hands_in_image, reference_crop_box};
@@ -99,6 +94,4 @@ pub use bitt_texture::resample::resample_pca;
 /// Side of the square crops the BiTT annotation pickles' intrinsics refer to.
 pub use bitt_mesh::annotation::BITT_CROP_SIZE;
 
-fn absolute(p: &Path) -> PathBuf {
-    std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf())
-}
+use crate::input::absolute;

@@ -107,7 +107,7 @@ pub fn orbit_hands(
     let all = hands.camera_vertices(models)?;
     let center = all.iter().copied().sum::<DVec3>() / all.len().max(1) as f64;
     Ok(TwoHandScene {
-        camera: crate::run::orbit_camera(&hands.camera, center, yaw, pitch),
+        camera: bitt_mesh::camera::orbit_camera(&hands.camera, center, yaw, pitch),
         ..hands.clone()
     })
 }

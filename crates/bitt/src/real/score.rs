@@ -17,9 +17,9 @@ use crate::trainer::Trainer;
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct RealScores {
     /// Mean over the novel views.
-    pub novel_views: Option<crate::run::MeanScore>,
+    pub novel_views: Option<crate::evaluate::MeanScore>,
     /// Mean over the novel poses.
-    pub novel_poses: Option<crate::run::MeanScore>,
+    pub novel_poses: Option<crate::evaluate::MeanScore>,
     /// Per view: name, fine and coarse metrics.
     pub views: Vec<(String, crate::evaluate::ViewScore)>,
 }
@@ -83,7 +83,7 @@ pub fn score_real(trainer: &Trainer, scene: &RealScene) -> Result<RealScores, Bi
     let mean = |s: &[crate::evaluate::ViewScore]| {
         let fine: Vec<_> = s.iter().map(|x| x.fine).collect();
         let coarse: Vec<_> = s.iter().map(|x| x.coarse).collect();
-        Some(crate::run::MeanScore {
+        Some(crate::evaluate::MeanScore {
             fine: crate::evaluate::mean_metrics(&fine)?,
             coarse: crate::evaluate::mean_metrics(&coarse)?,
             count: s.len(),

@@ -119,7 +119,7 @@ pub fn refined_real_trainer(
         )));
     }
     if config.loss.photo_mask > 0.0 {
-        super::view::check_photo_under_hands(view_image, hands, &models, config.loss.photo_mask)?;
+        crate::input::check_photo_under_hands(view_image, hands, &models, config.loss.photo_mask)?;
     }
     let assets = HandAssets::new(models, config.texture.resolution)?;
     let pca = texture_model(&mut config, prior, &assets, cache, &device.clone().inner())?;
@@ -141,7 +141,8 @@ pub fn refined_real_trainer(
         }
         None => None,
     };
-    let geometry = ViewGeometry::new(&assets, hands, device)?;
+    let geometry = ViewGeometry::new(&assets, hands, device)?
+        .with_occlusion(&assets, config.loss.photo_occlusion)?;
     let threshold = config.loss.photo_mask;
     let one_colour_light = config.loss.photo_light;
     let mut trainer = Trainer::new(config, assets, &pca, geometry, view_image, None, device)?;

@@ -17,11 +17,12 @@ use crate::BittError;
 use crate::assets::HandAssets;
 use crate::config::TrainConfig;
 use crate::input::ImageInput;
-use crate::metrics::mask_iou;
-use crate::real::{
-    BITT_CROP_SIZE, HandSource, PriorSource, check_hand_placement, check_sources, hands_in_image,
-    load_models, read_image, reference_crop_box, texture_model,
+use crate::input::{
+    HandSource, PriorSource, check_hand_placement, check_sources, hands_in_image, load_models,
+    read_image, reference_crop_box, texture_model,
 };
+use crate::metrics::mask_iou;
+use bitt_mesh::annotation::BITT_CROP_SIZE;
 
 /// The refined hands file of `bitt refine-hands`.
 pub const HANDS_JSON: &str = "hands.json";
@@ -109,7 +110,7 @@ pub fn refine_scene(
     device: &Device,
     observer: &mut dyn RefineObserver,
 ) -> Result<SceneRefinement, BittError> {
-    let pca = crate::run::texture_prior(train, cache, &device.clone().inner())?;
+    let pca = crate::texture_model::texture_prior(train, cache, &device.clone().inner())?;
     let assets = HandAssets::new(procedural_pair(), train.texture.resolution)?;
     let refinement = refine_synthetic(
         scene,
@@ -316,7 +317,7 @@ pub fn refine_photo(
     observer: &mut dyn RefineObserver,
 ) -> Result<PhotoRefinement, BittError> {
     check_sources(hands, prior)?;
-    crate::real::require_image(image)?;
+    crate::input::require_image(image)?;
     let scene = bitt_mesh::load_bitt_annotation(annotation, (BITT_CROP_SIZE, BITT_CROP_SIZE))?;
     for side in bitt_mesh::Side::BOTH {
         if scene.hand(side).is_none() {
@@ -450,19 +451,14 @@ pub fn refine_photo_hands(
 /// # Errors
 /// [`BittError::Invalid`] naming the folder.
 pub fn check_refine_out(out: &Path) -> Result<(), BittError> {
-    crate::outputs::check_own_folder(
-        out,
-        crate::run::files::REFINE,
-        "refine-hands",
-        &REFINE_NAMES,
-    )
+    crate::outputs::check_own_folder(out, crate::files::REFINE, "refine-hands", &REFINE_NAMES)
 }
 
 /// The names a `refine-hands` folder holds.
 const REFINE_NAMES: [&str; 3] = [
     HANDS_JSON,
-    crate::run::files::REFINE_OVERLAY,
-    crate::run::files::REFINE,
+    crate::files::REFINE_OVERLAY,
+    crate::files::REFINE,
 ];
 
 /// Writes `hands.json`, `refine.json` and `overlay.png` as the folder `out`, as a whole (a
@@ -478,8 +474,8 @@ pub fn write_refine_outputs(
     record: &serde_json::Value,
     overlay: &(Vec<f32>, [usize; 2]),
 ) -> Result<(), BittError> {
+    use crate::files::{REFINE, REFINE_OVERLAY};
     use crate::outputs::{json_bytes, png_file_bytes};
-    use crate::run::files::{REFINE, REFINE_OVERLAY};
     let text = bitt_mesh::annotation::hands_json(hands, models)?;
     let [h, w] = overlay.1;
     let files = [

@@ -1,6 +1,29 @@
-//! Bringing an input image of any size to the preset's square size: crop a square around
-//! both hands (the reference's crop around their projected box), resize, and adjust the
-//! camera intrinsics to match.
+//! What a run is given, read and checked: the hand models and texture prior it names
+//! (`prior.rs`: MANO or procedural hands, HTML or the procedural PCA), the photos and their
+//! hands as prepared views (`view.rs`), and bringing an input image of any size to the
+//! preset's square size: crop a square around both hands (the reference's crop around their
+//! projected box), resize, and adjust the camera intrinsics to match.
+//!
+//! Architecture invariant: nothing here trains, refines or writes a run; the jobs above
+//! (`real`, `fit`, `refine`, `detect`) read their inputs through it.
+
+mod prior;
+mod view;
+
+pub use prior::{
+    HandSource, PriorSource, adapt_config_to_prior, attach_html_uvs, check_sources,
+    left_uv_from_right, load_html_prior, load_models, sources, texture_model,
+};
+pub(crate) use view::check_photo_under_hands;
+pub use view::{
+    HAND_DEPTH_RANGE_M, MIN_HAND_INSIDE, RealScene, RealView, annotation_view,
+    check_hand_placement, interhand_views, prepare_view, read_image, require_image,
+};
+
+/// `p` made absolute (as given when that fails).
+pub(crate) fn absolute(p: &std::path::Path) -> std::path::PathBuf {
+    std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf())
+}
 
 use std::path::Path;
 

@@ -6,9 +6,9 @@ use bitt_mesh::interhand::{InterHandScene, InterHandView};
 use bitt_mesh::{HandPair, PinholeCamera, Side, TwoHandScene};
 use bitt_texture::load_image;
 
-use super::BITT_CROP_SIZE;
 use crate::BittError;
 use crate::input::{ImageInput, hands_in_image, reference_crop_box};
+use bitt_mesh::annotation::BITT_CROP_SIZE;
 
 /// One prepared view: the image at the preset's size and the hands with the fitted camera.
 #[derive(Debug, Clone, PartialEq)]

@@ -247,7 +247,7 @@ pub fn texture_model(
     device: &Device,
 ) -> Result<TexturePca, BittError> {
     match prior {
-        PriorSource::Procedural => crate::run::texture_prior(config, cache, device),
+        PriorSource::Procedural => crate::texture_model::texture_prior(config, cache, device),
         PriorSource::Html { dir } => {
             let html = load_html_prior(dir)?;
             let pca = resample_pca(&html, &assets.layouts[1])?;
