@@ -213,15 +213,19 @@ fn circles(graph: &BTreeMap<Vec<String>, BTreeSet<Vec<String>>>) -> Vec<Vec<Vec<
     s.found
 }
 
-/// Module circles inside one crate's `src`: a file's module depends on another file's module
-/// when its code names it (or an item in it). A parent naming its child, or a child naming
-/// an ancestor, is the module tree itself and is not counted.
-fn module_circles(src: &Path) -> Vec<Vec<Vec<String>>> {
+/// The modules of one crate's `src` that name each other, grouped by `group` (a module's
+/// path to the node it belongs to): a file's module depends on another file's module when
+/// its code names it (or an item in it). A parent naming its child, or a child naming an
+/// ancestor, is the module tree itself and is not counted; nor is a group naming itself.
+fn module_graph(
+    src: &Path,
+    group: impl Fn(&[String]) -> Vec<String>,
+) -> BTreeMap<Vec<String>, BTreeSet<Vec<String>>> {
     let files = rust_files(src);
     let modules: BTreeSet<Vec<String>> = files.iter().map(|f| module_of(src, f)).collect();
     let mut graph: BTreeMap<Vec<String>, BTreeSet<Vec<String>>> = modules
         .iter()
-        .map(|m| (m.clone(), BTreeSet::new()))
+        .map(|m| (group(m), BTreeSet::new()))
         .collect();
     for file in &files {
         let module = module_of(src, file);
@@ -234,39 +238,25 @@ fn module_circles(src: &Path) -> Vec<Vec<Vec<String>>> {
             let Some(target) = target else { continue };
             let ancestor = target.len() < module.len() && module.starts_with(&target);
             let descendant = target.len() > module.len() && target.starts_with(&module);
-            if target != module && !ancestor && !descendant {
-                graph.get_mut(&module).unwrap().insert(target);
+            let (from, to) = (group(&module), group(&target));
+            if from != to && !ancestor && !descendant {
+                graph.get_mut(&from).unwrap().insert(to);
             }
         }
     }
-    circles(&graph)
+    graph
+}
+
+/// Module circles inside one crate's `src` (see [`module_graph`]).
+fn module_circles(src: &Path) -> Vec<Vec<Vec<String>>> {
+    circles(&module_graph(src, |m| m.to_vec()))
 }
 
 /// Circles between a crate's top-level modules (a folder such as `real/` counts as one
 /// module with everything below it), which [`module_circles`] cannot see when they pass
 /// through different files of a folder.
 fn top_level_circles(src: &Path) -> Vec<Vec<Vec<String>>> {
-    let files = rust_files(src);
-    let modules: BTreeSet<Vec<String>> = files.iter().map(|f| module_of(src, f)).collect();
-    let top = |m: &[String]| m.first().map(|s| vec![s.clone()]).unwrap_or_default();
-    let mut graph: BTreeMap<Vec<String>, BTreeSet<Vec<String>>> =
-        modules.iter().map(|m| (top(m), BTreeSet::new())).collect();
-    for file in &files {
-        let module = module_of(src, file);
-        let text = std::fs::read_to_string(file).unwrap();
-        for path in references(&module, &code(&text)) {
-            let target = (1..=path.len())
-                .rev()
-                .map(|k| path[..k].to_vec())
-                .find(|p| modules.contains(p));
-            let Some(target) = target else { continue };
-            let (from, to) = (top(&module), top(&target));
-            if !from.is_empty() && !to.is_empty() && from != to {
-                graph.get_mut(&from).unwrap().insert(to);
-            }
-        }
-    }
-    circles(&graph)
+    circles(&module_graph(src, |m| m.iter().take(1).cloned().collect()))
 }
 
 #[test]
@@ -326,6 +316,28 @@ fn a_circle_between_sibling_modules_is_found() {
     let mut names: Vec<String> = found[0].iter().map(|m| m.join("::")).collect();
     names.sort();
     assert_eq!(names, ["a", "b", "c::d"]);
+}
+
+/// A circle through two files of one folder (`c/d.rs` names `b`, `b` names `c/e.rs`) is no
+/// circle between files, but one between the top-level modules `b` and `c`.
+#[test]
+fn a_circle_through_a_folder_is_found() {
+    let dir = std::env::temp_dir().join(format!("bitt-arch-folder-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("c")).unwrap();
+    std::fs::write(dir.join("lib.rs"), "//! x\nmod b;\nmod c;\n").unwrap();
+    std::fs::write(dir.join("b.rs"), "//! b\npub struct B(crate::c::e::E);\n").unwrap();
+    std::fs::write(dir.join("c/mod.rs"), "//! c\npub mod d;\npub mod e;\n").unwrap();
+    std::fs::write(dir.join("c/d.rs"), "//! d\npub struct D(crate::b::B);\n").unwrap();
+    std::fs::write(dir.join("c/e.rs"), "//! e\npub struct E;\n").unwrap();
+    let files = module_circles(&dir);
+    let folders = top_level_circles(&dir);
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(files.is_empty(), "{files:?}");
+    assert_eq!(folders.len(), 1, "{folders:?}");
+    let mut names: Vec<String> = folders[0].iter().map(|m| m.join("::")).collect();
+    names.sort();
+    assert_eq!(names, ["b", "c"]);
 }
 
 #[test]

@@ -13,6 +13,92 @@ pub const MAX_LEARNING_RATE: f64 = 1.0;
 /// The largest loss weight a configuration may give a term (the paper's are at most 1).
 pub const MAX_LOSS_WEIGHT: f64 = 1e3;
 
+/// The interval a configuration number must lie in, for [`check_field`]: every
+/// configuration of the project (training, refinement, keypoint fit) checks its numbers
+/// through it, so each refusal names the field and the allowed range the same way.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Bounds {
+    lo: f64,
+    lo_open: bool,
+    hi: f64,
+    hi_open: bool,
+    why: &'static str,
+}
+
+impl Bounds {
+    /// Finite and above 0.
+    pub const POSITIVE: Bounds = Bounds::new(0.0, true, f64::INFINITY, true);
+    /// Finite and at least 0.
+    pub const NON_NEGATIVE: Bounds = Bounds::new(0.0, false, f64::INFINITY, true);
+    /// `[0, 1]`.
+    pub const UNIT: Bounds = Bounds::new(0.0, false, 1.0, false);
+
+    /// `lo` to `hi`, each end open or closed.
+    pub const fn new(lo: f64, lo_open: bool, hi: f64, hi_open: bool) -> Self {
+        Bounds {
+            lo,
+            lo_open,
+            hi,
+            hi_open,
+            why: "",
+        }
+    }
+
+    /// The same bounds, with the reason given after the range in a refusal.
+    pub const fn because(self, why: &'static str) -> Self {
+        Bounds { why, ..self }
+    }
+
+    /// Whether `value` lies within (NaN and infinities never do).
+    pub fn contains(&self, value: f64) -> bool {
+        value.is_finite()
+            && if self.lo_open {
+                value > self.lo
+            } else {
+                value >= self.lo
+            }
+            && if self.hi_open {
+                value < self.hi
+            } else {
+                value <= self.hi
+            }
+    }
+}
+
+impl std::fmt::Display for Bounds {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.hi.is_infinite() {
+            let op = if self.lo_open { "above" } else { "at least" };
+            write!(f, "finite and {op} {}", self.lo)?;
+        } else {
+            let (l, r) = (
+                if self.lo_open { '(' } else { '[' },
+                if self.hi_open { ')' } else { ']' },
+            );
+            write!(f, "in {l}{}, {}{r}", self.lo, self.hi)?;
+        }
+        if !self.why.is_empty() {
+            write!(f, " ({})", self.why)?;
+        }
+        Ok(())
+    }
+}
+
+/// Checks one configuration number: `Ok` within `bounds`, else an error naming `field` (its
+/// dotted path, `optim.learning_rate`), the value and the allowed range.
+///
+/// # Errors
+/// [`BittError::Invalid`] when `value` lies outside `bounds` or is not finite.
+pub fn check_field(field: &str, value: f64, bounds: Bounds) -> Result<(), BittError> {
+    if bounds.contains(value) {
+        Ok(())
+    } else {
+        Err(BittError::Invalid(format!(
+            "{field} = {value} is out of range: it must be {bounds}"
+        )))
+    }
+}
+
 /// Reads a configuration file's `text` as `T`, refusing fields `T` does not have (a typo
 /// would otherwise be silently ignored) and naming `path` and the field (`optim.learnig_rate`).
 /// Works for any nesting and any derive (the read value is written back and its keys
@@ -325,42 +411,19 @@ impl TrainConfig {
             return bad("checkpoint_every must be at least 1".into());
         }
         let o = &self.optim;
-        let check = |field: &str, value: f64, ok: bool, range: &str| {
-            if ok {
-                Ok(())
-            } else {
-                bad(format!(
-                    "optim.{field} = {value} is out of range: it must be {range}"
-                ))
-            }
-        };
-        check(
-            "learning_rate",
-            o.learning_rate,
-            o.learning_rate > 0.0 && o.learning_rate <= MAX_LEARNING_RATE,
-            &format!("in (0, {MAX_LEARNING_RATE}] (the paper's is 1e-3)"),
-        )?;
-        check("beta1", o.beta1, (0.0..1.0).contains(&o.beta1), "in [0, 1)")?;
-        check("beta2", o.beta2, (0.0..1.0).contains(&o.beta2), "in [0, 1)")?;
-        check(
-            "epsilon",
-            o.epsilon,
-            o.epsilon > 0.0 && o.epsilon <= 1.0,
-            "in (0, 1]",
-        )?;
-        check(
-            "decay_gamma",
-            o.decay_gamma,
-            o.decay_gamma > 0.0 && o.decay_gamma <= 1.0,
-            "in (0, 1]",
-        )?;
-        check(
-            "min_learning_rate",
-            o.min_learning_rate,
-            o.min_learning_rate >= 0.0 && o.min_learning_rate <= o.learning_rate,
-            "in [0, learning_rate]",
-        )?;
+        let lr = Bounds::new(0.0, true, MAX_LEARNING_RATE, false).because("the paper's is 1e-3");
+        check_field("optim.learning_rate", o.learning_rate, lr)?;
+        let below_one = Bounds::new(0.0, false, 1.0, true);
+        check_field("optim.beta1", o.beta1, below_one)?;
+        check_field("optim.beta2", o.beta2, below_one)?;
+        let up_to_one = Bounds::new(0.0, true, 1.0, false);
+        check_field("optim.epsilon", o.epsilon, up_to_one)?;
+        check_field("optim.decay_gamma", o.decay_gamma, up_to_one)?;
+        let floor =
+            Bounds::new(0.0, false, o.learning_rate, false).because("at most the learning rate");
+        check_field("optim.min_learning_rate", o.min_learning_rate, floor)?;
         let w = &self.loss;
+        let weight = Bounds::new(0.0, false, MAX_LOSS_WEIGHT, false);
         for (field, value) in [
             ("rec", w.rec),
             ("rec_coarse", w.rec_coarse),
@@ -369,22 +432,10 @@ impl TrainConfig {
             ("alb", w.alb),
             ("sym", w.sym),
         ] {
-            if !(value.is_finite() && (0.0..=MAX_LOSS_WEIGHT).contains(&value)) {
-                return bad(format!(
-                    "loss.{field} = {value} is out of range: it must be in [0, {MAX_LOSS_WEIGHT}]"
-                ));
-            }
+            check_field(&format!("loss.{field}"), value, weight)?;
         }
-        for (field, value) in [
-            ("photo_mask", w.photo_mask),
-            ("photo_occlusion", w.photo_occlusion),
-        ] {
-            if !(0.0..=1.0).contains(&value) {
-                return bad(format!(
-                    "loss.{field} = {value} is out of range: it must be in [0, 1]"
-                ));
-            }
-        }
+        check_field("loss.photo_mask", w.photo_mask, Bounds::UNIT)?;
+        check_field("loss.photo_occlusion", w.photo_occlusion, Bounds::UNIT)?;
         Ok(())
     }
 
@@ -470,6 +521,34 @@ mod tests {
         let old =
             TrainConfig::from_json(&value.to_string(), std::path::Path::new("c.json")).unwrap();
         assert_eq!(old.loss.photo_occlusion, 0.0);
+    }
+
+    /// Every configuration's numbers are refused the same way: the field, the value and the
+    /// range, open and closed ends told apart, NaN and infinities never inside.
+    #[test]
+    fn bounds_name_the_field_and_the_range() {
+        let e = |f, v, b| check_field(f, v, b).unwrap_err().to_string();
+        assert_eq!(
+            e("a.b", -1.0, Bounds::POSITIVE),
+            "a.b = -1 is out of range: it must be finite and above 0"
+        );
+        assert_eq!(
+            e("w", f64::INFINITY, Bounds::NON_NEGATIVE),
+            "w = inf is out of range: it must be finite and at least 0"
+        );
+        assert_eq!(
+            e("m", 1.5, Bounds::UNIT),
+            "m = 1.5 is out of range: it must be in [0, 1]"
+        );
+        let b = Bounds::new(0.0, false, 1.0, true).because("Adam's");
+        assert_eq!(
+            e("beta", 1.0, b),
+            "beta = 1 is out of range: it must be in [0, 1) (Adam's)"
+        );
+        assert!(check_field("beta", 0.0, b).is_ok());
+        assert!(check_field("p", 0.0, Bounds::POSITIVE).is_err());
+        assert!(check_field("p", f64::NAN, Bounds::UNIT).is_err());
+        assert!(check_field("p", 0.0, Bounds::NON_NEGATIVE).is_ok());
     }
 
     #[test]

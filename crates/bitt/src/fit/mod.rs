@@ -37,10 +37,10 @@ use burn::module::{Module, Param};
 use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::BittError;
-use crate::config::OptimConfig;
+use crate::config::{Bounds, OptimConfig, check_field};
 use crate::hand_layer::{HandLayer, HandLayerParams, host_params};
 use crate::hand_priors::{FLEXION_RANGE, HandPriors, flexion_angles, flexion_axes};
-use crate::optim::{Adam, MAX_LEARNING_RATE};
+use crate::optim::{Adam, STEP_BOUNDS};
 use crate::pipeline::read;
 
 pub use eval::{
@@ -148,52 +148,37 @@ impl FitConfig {
     /// # Errors
     /// [`BittError::Invalid`] naming the value.
     pub fn validate(&self) -> Result<(), BittError> {
-        let positive = [
-            ("learning_rate", self.learning_rate),
+        check_field("fit.learning_rate", self.learning_rate, STEP_BOUNDS)?;
+        for (name, value) in [
             ("translation_unit", self.translation_unit),
             ("shape_unit", self.shape_unit),
             ("robust_scale_px", self.robust_scale_px),
             ("restart_residual_px", self.restart_residual_px),
             ("joint_radius", self.joint_radius),
             ("hyperextension", self.hyperextension),
-        ];
-        for (name, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(BittError::Invalid(format!(
-                    "fit.{name} must be positive, got {v}"
-                )));
-            }
+        ] {
+            check_field(&format!("fit.{name}"), value, Bounds::POSITIVE)?;
         }
-        if self.learning_rate > MAX_LEARNING_RATE {
-            return Err(BittError::Invalid(format!(
-                "fit.learning_rate {} is above {MAX_LEARNING_RATE}: an Adam step of more \
-                 than a radian (or {} translation units) per iteration only diverges",
-                self.learning_rate, MAX_LEARNING_RATE
-            )));
-        }
-        if !(0.0..=1.0).contains(&self.final_lr_fraction) {
-            return Err(BittError::Invalid(
-                "fit.final_lr_fraction must be within 0-1".into(),
-            ));
-        }
+        check_field(
+            "fit.final_lr_fraction",
+            self.final_lr_fraction,
+            Bounds::UNIT,
+        )?;
         if self.orientations == 0 {
             return Err(BittError::Invalid(
                 "fit.orientations must be at least 1".into(),
             ));
         }
         let w = &self.weights;
-        let all = [
-            w.keypoints,
-            w.limits,
-            w.relaxed_pose,
-            w.off_axis,
-            w.shape,
-            w.penetration,
-        ];
-        if all.iter().any(|x| !(x.is_finite() && *x >= 0.0)) {
-            return Err(BittError::Invalid(
-                "fit.weights must be finite and non-negative".into(),
-            ));
+        for (name, value) in [
+            ("keypoints", w.keypoints),
+            ("limits", w.limits),
+            ("relaxed_pose", w.relaxed_pose),
+            ("off_axis", w.off_axis),
+            ("shape", w.shape),
+            ("penetration", w.penetration),
+        ] {
+            check_field(&format!("fit.weights.{name}"), value, Bounds::NON_NEGATIVE)?;
         }
         Ok(())
     }
@@ -1372,7 +1357,9 @@ mod tests {
         };
         let e = fit.validate().unwrap_err().to_string();
         assert!(
-            e.contains("fit.learning_rate 1000000000000000000000000000000 is above 1"),
+            e.contains("fit.learning_rate = 1000000000000000000000000000000 is out of range")
+                && e.contains("(0, 1]")
+                && e.contains("only diverges"),
             "{e}"
         );
         let refine = crate::refine::RefineConfig {
@@ -1380,7 +1367,10 @@ mod tests {
             ..Default::default()
         };
         let e = refine.validate().unwrap_err().to_string();
-        assert!(e.contains("refine.learning_rate 2 is above 1"), "{e}");
+        assert!(
+            e.contains("refine.learning_rate = 2 is out of range"),
+            "{e}"
+        );
         FitConfig::default().validate().unwrap();
     }
 

@@ -39,11 +39,11 @@ use burn::tensor::{Device, Int, Tensor, TensorData};
 
 use crate::BittError;
 use crate::assets::HandAssets;
-use crate::config::OptimConfig;
+use crate::config::{Bounds, OptimConfig, check_field};
 use crate::hand_layer::{HandLayer, HandLayerParams, has_learned_pose_pca, host_params};
 use crate::hand_priors::HandPriors;
 use crate::metrics::mask_iou;
-use crate::optim::{Adam, MAX_LEARNING_RATE};
+use crate::optim::{Adam, STEP_BOUNDS};
 use crate::pipeline::{point_light, read};
 
 pub use crate::outputs::overlay_scale;
@@ -153,49 +153,38 @@ impl RefineConfig {
     /// # Errors
     /// [`BittError::Invalid`] naming the value.
     pub fn validate(&self) -> Result<(), BittError> {
-        let positive = [
-            ("learning_rate", self.learning_rate),
+        check_field("refine.learning_rate", self.learning_rate, STEP_BOUNDS)?;
+        for (name, value) in [
             ("translation_unit", self.translation_unit),
             ("shape_unit", self.shape_unit),
             ("uninformed_pose_unit", self.uninformed_pose_unit),
             ("coverage_radius", self.coverage_radius),
             ("joint_radius", self.joint_radius),
-        ];
-        for (name, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(BittError::Invalid(format!(
-                    "refine.{name} must be positive, got {v}"
-                )));
-            }
+        ] {
+            check_field(&format!("refine.{name}"), value, Bounds::POSITIVE)?;
         }
-        if self.learning_rate > MAX_LEARNING_RATE {
-            return Err(BittError::Invalid(format!(
-                "refine.learning_rate {} is above {MAX_LEARNING_RATE}: an Adam step of more \
-                 than a radian (or {} translation units) per iteration only diverges",
-                self.learning_rate, MAX_LEARNING_RATE
-            )));
-        }
-        if !(0.0..=1.0).contains(&self.final_lr_fraction) {
-            return Err(BittError::Invalid(
-                "refine.final_lr_fraction must be within 0-1".into(),
-            ));
-        }
+        check_field(
+            "refine.final_lr_fraction",
+            self.final_lr_fraction,
+            Bounds::UNIT,
+        )?;
         let w = &self.weights;
-        let all = [
-            w.silhouette,
-            w.outside,
-            w.coverage,
-            w.photometric,
-            w.pose,
-            w.uninformed_pose,
-            w.limits,
-            w.shape,
-            w.penetration,
-        ];
-        if all.iter().any(|x| !(x.is_finite() && *x >= 0.0)) {
-            return Err(BittError::Invalid(
-                "refine.weights must be finite and non-negative".into(),
-            ));
+        for (name, value) in [
+            ("silhouette", w.silhouette),
+            ("outside", w.outside),
+            ("coverage", w.coverage),
+            ("photometric", w.photometric),
+            ("pose", w.pose),
+            ("uninformed_pose", w.uninformed_pose),
+            ("limits", w.limits),
+            ("shape", w.shape),
+            ("penetration", w.penetration),
+        ] {
+            check_field(
+                &format!("refine.weights.{name}"),
+                value,
+                Bounds::NON_NEGATIVE,
+            )?;
         }
         Ok(())
     }
