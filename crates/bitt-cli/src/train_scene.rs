@@ -292,7 +292,7 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
     let mut bar = TrainBar::new(stop_flag()?);
     let mut gave_up = None;
     match trainer.train(Some(&out.join(files::CHECKPOINT)), &mut bar) {
-        Err(bitt::BittError::Interrupted(i)) => {
+        Err(bitt::TrainError::Interrupted(i)) => {
             eprintln!(
                 "\ninterrupted after iteration {i}; saved {}. Continue with: cargo xtask train-scene --resume {}",
                 out.join(files::CHECKPOINT).display(),
@@ -300,7 +300,7 @@ pub fn run(args: &TrainSceneArgs) -> Result<()> {
             );
             std::process::exit(130);
         }
-        Err(e @ bitt::BittError::RecoveryExhausted { .. }) => {
+        Err(e @ bitt::TrainError::RecoveryExhausted { .. }) => {
             eprintln!(
                 "\nerror: {e}\nwriting the results of that state (iteration {}) anyway",
                 trainer.iteration

@@ -24,7 +24,7 @@ fn read_text(path: &Path) -> Result<String, BittError> {
 /// The file cannot be read or is not a valid configuration.
 pub fn training_config(config: Option<&Path>, preset: Preset) -> Result<TrainConfig, BittError> {
     match config {
-        Some(path) => TrainConfig::from_json(&read_text(path)?, path),
+        Some(path) => Ok(TrainConfig::from_json(&read_text(path)?, path)?),
         None => Ok(TrainConfig::preset(preset)),
     }
 }

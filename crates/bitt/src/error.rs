@@ -17,23 +17,6 @@ pub enum BittError {
     /// A loss or output that is not finite.
     #[error("non-finite value: {0}")]
     NonFinite(String),
-    /// Training gave up after [`crate::trainer::MAX_NON_FINITE`] non-finite losses; the
-    /// trainer holds the last good state (iteration `restored`), which is also the saved
-    /// checkpoint, so its results can still be written.
-    #[error(
-        "{message}; gave up after {count} recoveries and went back to iteration {restored}, the last good state"
-    )]
-    RecoveryExhausted {
-        /// What the last failure was.
-        message: String,
-        /// Recoveries made.
-        count: usize,
-        /// The iteration of the state the trainer now holds.
-        restored: usize,
-    },
-    /// The run was interrupted (Ctrl-C); the last state is saved.
-    #[error("interrupted at iteration {0}; the run was saved and can be resumed")]
-    Interrupted(usize),
     /// From the geometry crate.
     #[error(transparent)]
     Mesh(#[from] bitt_mesh::MeshError),
@@ -52,6 +35,9 @@ pub enum BittError {
     /// From the hand detector.
     #[error(transparent)]
     Detect(#[from] bitt_detect::DetectError),
+    /// From the training core.
+    #[error(transparent)]
+    Train(#[from] bitt_train::TrainError),
     /// What was being done (an option and its file, a scene) when `source` went wrong.
     #[error("{context}")]
     Context {

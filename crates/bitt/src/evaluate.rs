@@ -221,7 +221,7 @@ pub fn render_geometry(
         light,
         &trainer.settings,
     )?;
-    read(r.image)
+    Ok(read(r.image)?)
 }
 
 /// Means of fine and coarse metrics over several views.

@@ -1,15 +1,13 @@
 //! The BiTT pipeline (paper Sec. 3-4): from one image of two interacting hands and their
 //! meshes to relightable UV textures of both hands.
 //!
-//! - [`config`]: the trainer's configuration and the `paper` / `quick` / `tiny` presets.
+//! The training core is `bitt-train`'s, re-exported here under the same paths: [`config`],
+//! [`assets`], [`pipeline`], [`losses`], [`optim`], [`checkpoint`], [`trainer`].
+//!
 //! - [`config_files`]: the configuration files the commands take (training, refinement, fit).
-//! - [`assets`]: hand models, render meshes, texture layouts; one view's geometry.
 //! - [`demo`]: the built-in two-hand demo scene (procedural or any other hands).
 //! - [`input`]: what a run is given: hand and prior sources, photos read and checked against
 //!   their hands, cropped and resized to the preset's size.
-//! - [`pipeline`]: the forward pass (scene estimation, coarse stage, fine stage).
-//! - [`losses`]: the paper's loss (eq. 6-10).
-//! - [`optim`], [`checkpoint`], [`trainer`]: Adam, checkpoints, the per-scene trainer.
 //! - [`metrics`], [`evaluate`]: image and texture metrics, renders at other views and poses.
 //! - [`pair_metrics`]: two image files compared (`bitt metrics`): metrics, LPIPS inputs, report.
 //! - [`lpips`]: LPIPS-VGG with user-provided weights (unavailable without them);
@@ -45,13 +43,10 @@
 //!   backends, the network benches, and `bitt gpu-check` (every GPU check in one report);
 //!   [`net_shapes`]: the networks' parameter counts and shapes (`bitt nets`).
 
-pub mod assets;
 pub mod avatar_export;
 pub mod backend_check;
 pub mod baselines;
 pub mod benchmark;
-pub mod checkpoint;
-pub mod config;
 pub mod config_files;
 pub mod demo;
 pub mod detect;
@@ -65,16 +60,13 @@ pub mod gpu_check;
 pub mod hand_layer;
 pub mod hand_priors;
 pub mod input;
-pub mod losses;
 pub mod lpips;
 pub mod lpips_convert;
 pub mod metrics;
 pub mod net_shapes;
 pub mod nets_bench;
-pub mod optim;
 pub mod outputs;
 pub mod pair_metrics;
-pub mod pipeline;
 pub mod plot;
 pub mod progress;
 pub mod real;
@@ -84,14 +76,14 @@ pub mod run_folder;
 pub mod saved;
 pub mod texture_model;
 pub mod train_scene;
-pub mod trainer;
 pub mod viewer;
 pub mod xr_page;
 
-pub use config::{LossWeights, OptimConfig, TrainConfig};
+pub use bitt_train::{
+    LossTerms, LossWeights, Observer, OptimConfig, Progress, TrainConfig, TrainError, Trainer,
+    assets, checkpoint, config, losses, optim, pipeline, trainer,
+};
 pub use error::BittError;
-pub use losses::LossTerms;
-pub use trainer::{Observer, Progress, Trainer};
 
 #[cfg(test)]
 mod tests;

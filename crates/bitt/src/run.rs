@@ -124,7 +124,7 @@ pub fn synthetic_trainer(
         ..scene.given.clone()
     };
     let geometry = ViewGeometry::new(&assets, &given, device)?;
-    Trainer::new(
+    Ok(Trainer::new(
         config.clone(),
         assets,
         pca,
@@ -132,7 +132,7 @@ pub fn synthetic_trainer(
         &input.image,
         input.mask.as_deref(),
         device,
-    )
+    )?)
 }
 
 /// Ground-truth scores of a synthetic run.
@@ -853,7 +853,7 @@ impl SavedAvatar {
             &light.to_light(device),
             &bitt_render::scene::RenderSettings::default(),
         )?;
-        read(r.image)
+        Ok(read(r.image)?)
     }
 
     /// The hands of the training view (or of novel pose `pose`), seen from the training

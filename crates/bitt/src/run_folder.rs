@@ -404,7 +404,7 @@ pub fn load_checkpoints(
                 ));
                 Ok((p, None, warnings))
             }
-            None => Err(e),
+            None => Err(e.into()),
         },
     }
 }

@@ -118,9 +118,10 @@ impl SavedRun {
     /// As [`HandAssets::new`].
     pub fn assets(&self) -> Result<HandAssets, BittError> {
         match self {
-            SavedRun::Synthetic(a) => {
-                HandAssets::new(procedural_pair(), a.config.texture.resolution)
-            }
+            SavedRun::Synthetic(a) => Ok(HandAssets::new(
+                procedural_pair(),
+                a.config.texture.resolution,
+            )?),
             SavedRun::Real(_, assets) => Ok((**assets).clone()),
         }
     }

@@ -170,7 +170,10 @@ fn a_checkpoint_whose_forward_pass_fails_is_skipped() {
     let mut resumed = synthetic_trainer(&scene, &config, &pca, &device).unwrap();
     resumed.resume_from(&latest, Some(previous)).unwrap();
     let lr_before = resumed.learning_rate();
-    assert!(matches!(resumed.step(), Err(BittError::NonFinite(_))));
+    assert!(matches!(
+        resumed.step(),
+        Err(crate::TrainError::NonFinite(_))
+    ));
     resumed.train(Some(&path), &mut Silent).unwrap();
     assert_eq!(resumed.iteration, 4);
     assert_eq!(resumed.events.len(), 1, "{:?}", resumed.events);
@@ -220,7 +223,7 @@ fn exhausted_recovery_keeps_the_last_good_state_and_its_results() {
     let mut rates = Rates(Vec::new(), 0);
     let e = t.train(Some(&path), &mut rates).unwrap_err();
     assert!(
-        matches!(e, BittError::RecoveryExhausted { restored: 2, count, .. } if count == crate::trainer::MAX_NON_FINITE),
+        matches!(e, crate::TrainError::RecoveryExhausted { restored: 2, count, .. } if count == crate::trainer::MAX_NON_FINITE),
         "{e}"
     );
     assert_eq!(rates.1, crate::trainer::MAX_NON_FINITE + 1);
@@ -307,7 +310,7 @@ fn a_non_finite_loss_is_recovered_from() {
         .map(|(s, v)| (s, vec![f32::NAN; v.len()]))
         .collect();
     t.nets = load_parameters(t.nets.clone(), &poisoned, &device).unwrap();
-    assert!(matches!(t.step(), Err(BittError::NonFinite(_))));
+    assert!(matches!(t.step(), Err(crate::TrainError::NonFinite(_))));
     t.config.iterations = 4;
     t.train(None, &mut Silent).unwrap();
     assert_eq!(t.iteration, 4);

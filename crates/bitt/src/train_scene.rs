@@ -640,7 +640,7 @@ pub fn training_line(trainer: &Trainer) -> String {
 
 /// The error of a run whose training gave up (`error`) but whose results, those of
 /// `iteration`, were written into `out`.
-pub fn unfinished_error(error: &BittError, out: &Path, iteration: usize) -> BittError {
+pub fn unfinished_error(error: &dyn std::fmt::Display, out: &Path, iteration: usize) -> BittError {
     BittError::Invalid(format!(
         "training did not finish: {error}. The results in {} are those of iteration {iteration}; \
          `--resume {}` continues from there at the lowered learning rate",

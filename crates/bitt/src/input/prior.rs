@@ -233,7 +233,7 @@ pub fn adapt_config_to_prior(config: &mut TrainConfig, components: usize) -> Res
     config.nets.html.coefficients_per_hand = components;
     config.texture.components = components;
     config.texture.identities = config.texture.identities.max(components.div_ceil(2) + 1);
-    config.validate()
+    Ok(config.validate()?)
 }
 
 /// The texture prior for `assets`: HTML resampled onto the assets' layout (the configuration

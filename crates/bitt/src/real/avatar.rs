@@ -96,5 +96,5 @@ pub fn render_textures(
         &light.to_light(device),
         &RenderSettings::default(),
     )?;
-    read(r.image)
+    Ok(read(r.image)?)
 }

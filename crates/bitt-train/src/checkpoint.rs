@@ -15,7 +15,7 @@ use std::path::Path;
 use bitt_mesh::st;
 use safetensors::Dtype;
 
-use crate::BittError;
+use crate::TrainError;
 use crate::losses::LossTerms;
 
 /// The `format` metadata of a checkpoint file.
@@ -63,7 +63,7 @@ fn f64_bytes(values: &[f64]) -> Vec<u8> {
 
 impl Checkpoint {
     /// Writes the checkpoint to `path` atomically.
-    pub fn save(&self, path: &Path) -> Result<(), BittError> {
+    pub fn save(&self, path: &Path) -> Result<(), TrainError> {
         let mut entries: Vec<st::Entry> = Vec::new();
         for (i, (shape, values)) in self.parameters.iter().enumerate() {
             entries.push((
@@ -99,7 +99,7 @@ impl Checkpoint {
             f64_bytes(&[self.lr_scale, self.seconds]),
         ));
         let json = |v: serde_json::Result<String>| {
-            v.map_err(|e| BittError::corrupt(path, format!("cannot encode metadata: {e}")))
+            v.map_err(|e| TrainError::corrupt(path, format!("cannot encode metadata: {e}")))
         };
         let metadata = HashMap::from([
             ("format".to_string(), CHECKPOINT_FORMAT.to_string()),
@@ -120,14 +120,14 @@ impl Checkpoint {
     }
 
     /// Reads a checkpoint written by [`Checkpoint::save`], verifying its checksums and counts.
-    pub fn load(path: &Path) -> Result<Self, BittError> {
-        let bytes = std::fs::read(path).map_err(|e| BittError::io(path, e))?;
+    pub fn load(path: &Path) -> Result<Self, TrainError> {
+        let bytes = std::fs::read(path).map_err(|e| TrainError::io(path, e))?;
         Self::from_bytes(&bytes, path)
     }
 
     /// [`Checkpoint::load`] of a file's bytes; `path` names it in errors.
-    pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<Self, BittError> {
-        let bad = |m: String| BittError::corrupt(path, m);
+    pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<Self, TrainError> {
+        let bad = |m: String| TrainError::corrupt(path, m);
         let r = st::Reader::open(bytes, path)?;
         let meta = r.metadata();
         let get = |k: &str| {
@@ -149,9 +149,9 @@ impl Checkpoint {
             text: &str,
             key: &str,
             path: &Path,
-        ) -> Result<T, BittError> {
+        ) -> Result<T, TrainError> {
             serde_json::from_str(text)
-                .map_err(|e| BittError::corrupt(path, format!("metadata `{key}`: {e}")))
+                .map_err(|e| TrainError::corrupt(path, format!("metadata `{key}`: {e}")))
         }
         if !legacy {
             // `st::Reader::open` verified the checksums; a checkpoint must have them.
@@ -171,7 +171,7 @@ impl Checkpoint {
         let count: usize = parse(&get("parameters")?, "parameters", path)?;
         let adam_steps: Vec<u64> = parse(&get("adam_steps")?, "adam_steps", path)?;
         let events: Vec<(usize, String)> = parse(&get("events")?, "events", path)?;
-        let f64s = |name: &str, rank: usize| -> Result<Vec<f64>, BittError> {
+        let f64s = |name: &str, rank: usize| -> Result<Vec<f64>, TrainError> {
             Ok(r.values::<f64>(name, &vec![None; rank])?.1)
         };
         let (lr_scale, seconds, history) = if legacy {
@@ -200,7 +200,7 @@ impl Checkpoint {
             }
             (lr_scale, seconds, history)
         };
-        let read = |name: &str| -> Result<Option<HostTensor>, BittError> {
+        let read = |name: &str| -> Result<Option<HostTensor>, TrainError> {
             if !r.has(name) {
                 return Ok(None);
             }

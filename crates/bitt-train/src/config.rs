@@ -4,7 +4,7 @@
 use bitt_nets::{BittNetsConfig, Preset};
 use bitt_texture::ProceduralTextureConfig;
 
-use crate::BittError;
+use crate::TrainError;
 
 /// The largest learning rate a configuration may ask for (Adam steps of this size already
 /// destroy the networks; the paper's is 1e-3).
@@ -88,12 +88,12 @@ impl std::fmt::Display for Bounds {
 /// dotted path, `optim.learning_rate`), the value and the allowed range.
 ///
 /// # Errors
-/// [`BittError::Invalid`] when `value` lies outside `bounds` or is not finite.
-pub fn check_field(field: &str, value: f64, bounds: Bounds) -> Result<(), BittError> {
+/// [`TrainError::Invalid`] when `value` lies outside `bounds` or is not finite.
+pub fn check_field(field: &str, value: f64, bounds: Bounds) -> Result<(), TrainError> {
     if bounds.contains(value) {
         Ok(())
     } else {
-        Err(BittError::Invalid(format!(
+        Err(TrainError::Invalid(format!(
             "{field} = {value} is out of range: it must be {bounds}"
         )))
     }
@@ -103,20 +103,20 @@ pub fn check_field(field: &str, value: f64, bounds: Bounds) -> Result<(), BittEr
 /// would otherwise be silently ignored) and naming `path` and the field (`optim.learnig_rate`).
 /// Works for any nesting and any derive (the read value is written back and its keys
 /// compared), so every configuration file of the project goes through it.
-pub fn read_config<T>(text: &str, path: &std::path::Path, what: &str) -> Result<T, BittError>
+pub fn read_config<T>(text: &str, path: &std::path::Path, what: &str) -> Result<T, TrainError>
 where
     T: serde::Serialize + serde::de::DeserializeOwned,
 {
     let raw: serde_json::Value = serde_json::from_str(text)
-        .map_err(|e| BittError::corrupt(path, format!("not {what}: {e}")))?;
+        .map_err(|e| TrainError::corrupt(path, format!("not {what}: {e}")))?;
     let value: T = serde_json::from_value(raw.clone())
-        .map_err(|e| BittError::corrupt(path, format!("not {what}: {e}")))?;
+        .map_err(|e| TrainError::corrupt(path, format!("not {what}: {e}")))?;
     let known = serde_json::to_value(&value)
-        .map_err(|e| BittError::corrupt(path, format!("not {what}: {e}")))?;
+        .map_err(|e| TrainError::corrupt(path, format!("not {what}: {e}")))?;
     let mut unknown = Vec::new();
     unknown_fields(&raw, &known, "", &mut unknown);
     if !unknown.is_empty() {
-        return Err(BittError::corrupt(
+        return Err(TrainError::corrupt(
             path,
             format!(
                 "unknown field{} {} in {what} (misspelt? the fields are those of a run's \
@@ -386,7 +386,7 @@ impl TrainConfig {
         mut self,
         iterations: Option<usize>,
         seed: Option<u64>,
-    ) -> Result<Self, BittError> {
+    ) -> Result<Self, TrainError> {
         self.iterations = iterations.unwrap_or(self.iterations);
         self.seed = seed.unwrap_or(self.seed);
         self.validate()?;
@@ -394,8 +394,8 @@ impl TrainConfig {
     }
 
     /// Checks ranges and that the parts fit together.
-    pub fn validate(&self) -> Result<(), BittError> {
-        let bad = |m: String| Err(BittError::Invalid(m));
+    pub fn validate(&self) -> Result<(), TrainError> {
+        let bad = |m: String| Err(TrainError::Invalid(m));
         self.nets.validate()?;
         self.texture.validate()?;
         if self.nets.html.coefficients_per_hand != self.texture.components {
@@ -441,10 +441,10 @@ impl TrainConfig {
 
     /// Reads a `config.json`: unknown fields and out-of-range values are refused, naming
     /// the file and the field.
-    pub fn from_json(text: &str, path: &std::path::Path) -> Result<Self, BittError> {
+    pub fn from_json(text: &str, path: &std::path::Path) -> Result<Self, TrainError> {
         let c: TrainConfig = read_config(text, path, "a training config")?;
         c.validate()
-            .map_err(|e| BittError::corrupt(path, e.to_string()))?;
+            .map_err(|e| TrainError::corrupt(path, e.to_string()))?;
         Ok(c)
     }
 }

@@ -12,7 +12,7 @@ use std::sync::{Arc, Mutex};
 
 use burn::tensor::{Device, Tensor, TensorData};
 
-use crate::BittError;
+use crate::TrainError;
 
 /// Gutter ring (texels) around the UV charts of the texture layouts (as `bitt render`).
 pub const TEXTURE_GUTTER: usize = 2;
@@ -36,7 +36,7 @@ pub struct HandAssets {
 
 impl HandAssets {
     /// Builds the meshes and `texture_size`-square layouts of `models` (both need a UV layout).
-    pub fn new(models: HandPair, texture_size: usize) -> Result<Self, BittError> {
+    pub fn new(models: HandPair, texture_size: usize) -> Result<Self, TrainError> {
         let mut meshes = Vec::new();
         let mut layouts = Vec::new();
         let mut surfaces = Vec::new();
@@ -44,7 +44,7 @@ impl HandAssets {
             let model = models.get(side);
             meshes.push(bitt_synth::textured_mesh(model)?);
             let uv = model.uv.as_ref().ok_or_else(|| {
-                BittError::Invalid(format!("the {side} hand model has no UV layout"))
+                TrainError::Invalid(format!("the {side} hand model has no UV layout"))
             })?;
             let layout = TextureLayout::from_uv(uv, texture_size, texture_size, TEXTURE_GUTTER)?;
             surfaces.push(TexelSurface::new(
@@ -55,7 +55,7 @@ impl HandAssets {
             layouts.push(layout);
         }
         if layouts[0].num_texels() != layouts[1].num_texels() {
-            return Err(BittError::Invalid(format!(
+            return Err(TrainError::Invalid(format!(
                 "left and right texture layouts differ ({} vs {} texels)",
                 layouts[0].num_texels(),
                 layouts[1].num_texels()
@@ -81,12 +81,12 @@ impl HandAssets {
     /// layout would give a basis of the wrong size).
     ///
     /// # Errors
-    /// [`BittError::Invalid`] naming both texel counts.
-    pub fn check_prior(&self, pca: &bitt_texture::TexturePca) -> Result<(), BittError> {
+    /// [`TrainError::Invalid`] naming both texel counts.
+    pub fn check_prior(&self, pca: &bitt_texture::TexturePca) -> Result<(), TrainError> {
         if pca.layout.num_texels() == self.num_texels() {
             return Ok(());
         }
-        Err(BittError::Invalid(format!(
+        Err(TrainError::Invalid(format!(
             "the texture PCA covers {} texels, the hands' layout {}",
             pca.layout.num_texels(),
             self.num_texels()
@@ -152,12 +152,12 @@ impl ViewGeometry {
         assets: &HandAssets,
         scene: &TwoHandScene,
         device: &Device,
-    ) -> Result<Self, BittError> {
+    ) -> Result<Self, TrainError> {
         let posed = scene.pose_in_camera(&assets.models)?;
         let mut host = Vec::new();
         for side in [Side::Left, Side::Right] {
             let hand = posed.get(side).ok_or_else(|| {
-                BittError::Invalid(format!("the scene has no {side} hand; BiTT needs both"))
+                TrainError::Invalid(format!("the scene has no {side} hand; BiTT needs both"))
             })?;
             host.push(hand.vertices.clone());
         }
@@ -206,9 +206,13 @@ impl ViewGeometry {
     ///
     /// # Errors
     /// A strength outside `[0, 1]`, or vertices the rays cannot be cast over.
-    pub fn with_occlusion(mut self, assets: &HandAssets, strength: f64) -> Result<Self, BittError> {
+    pub fn with_occlusion(
+        mut self,
+        assets: &HandAssets,
+        strength: f64,
+    ) -> Result<Self, TrainError> {
         if !(0.0..=1.0).contains(&strength) {
-            return Err(BittError::Invalid(format!(
+            return Err(TrainError::Invalid(format!(
                 "the occlusion strength must lie in [0, 1], not {strength}"
             )));
         }
@@ -236,7 +240,7 @@ impl ViewGeometry {
     ///
     /// # Errors
     /// Vertices the rays cannot be cast over.
-    pub fn texel_occlusion(&self, assets: &HandAssets) -> Result<[Vec<f32>; 2], BittError> {
+    pub fn texel_occlusion(&self, assets: &HandAssets) -> Result<[Vec<f32>; 2], TrainError> {
         let ao = self.vertex_occlusion(assets)?;
         Ok([
             assets.surfaces[0].values(&ao[0])?,
@@ -245,7 +249,7 @@ impl ViewGeometry {
     }
 
     /// The ambient occlusion of both hands' vertices, left then right.
-    fn vertex_occlusion(&self, assets: &HandAssets) -> Result<Vec<Vec<f32>>, BittError> {
+    fn vertex_occlusion(&self, assets: &HandAssets) -> Result<Vec<Vec<f32>>, TrainError> {
         let faces = [0, 1].map(|i| assets.meshes[i].topology.faces());
         let meshes = [0, 1].map(|i| bitt_mesh::occlusion::OccluderMesh {
             vertices: &self.vertices_host[i],
@@ -280,7 +284,7 @@ impl ViewGeometry {
         settings: &RenderSettings,
         texture_size: usize,
         path: GeometryPath,
-    ) -> Result<Arc<SceneGeometry>, BittError> {
+    ) -> Result<Arc<SceneGeometry>, TrainError> {
         let key = (settings.depth, settings.antialias, texture_size, path);
         let mut cache = self.cache.0.lock().unwrap_or_else(|e| e.into_inner());
         if let Some((_, g)) = cache.iter().find(|(k, _)| *k == key) {
@@ -321,7 +325,7 @@ impl ViewGeometry {
         textures: [Tensor<2>; 2],
         light: &PointLight,
         settings: &RenderSettings,
-    ) -> Result<SceneRender, BittError> {
+    ) -> Result<SceneRender, TrainError> {
         let path = GeometryPath::Covered;
         let g = self.scene_geometry(assets, settings, assets.texture_size, path)?;
         Ok(SceneRender {
@@ -342,7 +346,7 @@ impl ViewGeometry {
         textures: [Tensor<2>; 2],
         light: &PointLight,
         settings: &RenderSettings,
-    ) -> Result<Tensor<3>, BittError> {
+    ) -> Result<Tensor<3>, TrainError> {
         let path = GeometryPath::Auto;
         let g = self.scene_geometry(assets, settings, assets.texture_size, path)?;
         self.shade(&g, gather, textures, light, settings)
@@ -355,7 +359,7 @@ impl ViewGeometry {
         textures: [Tensor<2>; 2],
         light: &PointLight,
         settings: &RenderSettings,
-    ) -> Result<Tensor<3>, BittError> {
+    ) -> Result<Tensor<3>, TrainError> {
         let [l, r] = textures;
         let images = [
             gather.compact_to_image(l, [0.0; 3]),

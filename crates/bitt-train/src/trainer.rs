@@ -9,7 +9,7 @@ use bitt_render::scene::RenderSettings;
 use bitt_texture::{LayoutGather, TexturePca, TexturePcaTensors};
 use burn::tensor::{Device, Tensor, TensorData};
 
-use crate::BittError;
+use crate::TrainError;
 use crate::assets::{HandAssets, ViewGeometry};
 use crate::checkpoint::Checkpoint;
 use crate::config::TrainConfig;
@@ -25,7 +25,7 @@ pub const MAX_NON_FINITE: usize = 8;
 /// generator (a module's random init in a test) holds it too: flex's generator is one
 /// `take`-and-put-back state, so a draw on another thread mid-initialisation shifts the
 /// networks' weights.
-pub(crate) static NETS_INIT: std::sync::Mutex<()> = std::sync::Mutex::new(());
+pub static NETS_INIT: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 /// The factor on the learning rate at every recovery from a non-finite loss.
 pub const RECOVERY_LR_FACTOR: f64 = 0.5;
@@ -56,7 +56,7 @@ pub fn previous_checkpoint_path(checkpoint: &Path) -> std::path::PathBuf {
 
 /// Keeps the current checkpoint file as the previous one before a new one replaces it: a
 /// hard link moved into place atomically (a copy where links are not supported).
-fn keep_as_previous(path: &Path) -> Result<(), BittError> {
+fn keep_as_previous(path: &Path) -> Result<(), TrainError> {
     if !path.is_file() {
         return Ok(());
     }
@@ -69,9 +69,9 @@ fn keep_as_previous(path: &Path) -> Result<(), BittError> {
     let tmp = previous.with_file_name(format!(".{name}.tmp{}", std::process::id()));
     let _ = std::fs::remove_file(&tmp);
     if std::fs::hard_link(path, &tmp).is_err() {
-        std::fs::copy(path, &tmp).map_err(|e| BittError::io(&tmp, e))?;
+        std::fs::copy(path, &tmp).map_err(|e| TrainError::io(&tmp, e))?;
     }
-    std::fs::rename(&tmp, &previous).map_err(|e| BittError::io(&previous, e))
+    std::fs::rename(&tmp, &previous).map_err(|e| TrainError::io(&previous, e))
 }
 
 /// What the trainer reports after each iteration.
@@ -158,11 +158,11 @@ impl Trainer {
         image: &[f32],
         mask: Option<&[f32]>,
         device: &Device,
-    ) -> Result<Self, BittError> {
+    ) -> Result<Self, TrainError> {
         config.validate()?;
         assets.check_prior(pca)?;
         if pca.num_components != config.nets.html.coefficients_per_hand {
-            return Err(BittError::Invalid(format!(
+            return Err(TrainError::Invalid(format!(
                 "the texture PCA has {} components, the HTML network predicts {}",
                 pca.num_components, config.nets.html.coefficients_per_hand
             )));
@@ -170,7 +170,7 @@ impl Trainer {
         let [h, w] = geometry.size();
         let s = config.nets.image_size;
         if [h, w] != [s, s] {
-            return Err(BittError::Invalid(format!(
+            return Err(TrainError::Invalid(format!(
                 "the training view is {w} x {h}; the {} preset needs {s} x {s} (crop and resize first)",
                 config.preset
             )));
@@ -186,12 +186,12 @@ impl Trainer {
             host.seed(config.seed);
             let initial = parameters_host(&config.nets.init(&host)?);
             load_parameters(config.nets.init(device)?, &initial, device)
-                .map_err(BittError::Invalid)?
+                .map_err(TrainError::Invalid)?
         };
         let view = TrainingView::new(&assets, geometry, image, mask, device)?;
         for (side, visible) in ["left", "right"].into_iter().zip(view.visible_fraction()) {
             if visible <= 0.0 {
-                return Err(BittError::Invalid(format!(
+                return Err(TrainError::Invalid(format!(
                     "the {side} hand shows no texel in the training view (it is hidden, behind \
                      the camera or off the image); BiTT needs both hands in view"
                 )));
@@ -223,7 +223,7 @@ impl Trainer {
     }
 
     /// One forward pass with the current networks.
-    pub fn forward(&self) -> Result<Outputs, BittError> {
+    pub fn forward(&self) -> Result<Outputs, TrainError> {
         forward(
             &self.nets,
             &self.pca,
@@ -237,11 +237,11 @@ impl Trainer {
 
     /// One iteration: forward, loss, backward, Adam. Returns the loss terms and the
     /// training-view PSNR, or `Err(NonFinite)` (networks unchanged) when the loss is not finite.
-    pub fn step(&mut self) -> Result<(LossTerms, f64), BittError> {
+    pub fn step(&mut self) -> Result<(LossTerms, f64), TrainError> {
         let outputs = self.forward()?;
         let l = loss(&outputs, &self.view, &self.config.loss);
         if l.terms.len() != LossTerms::COUNT {
-            return Err(BittError::Invalid(format!(
+            return Err(TrainError::Invalid(format!(
                 "the loss has {} terms, LossTerms::COUNT says {}",
                 l.terms.len(),
                 LossTerms::COUNT
@@ -269,7 +269,7 @@ impl Trainer {
         let terms = LossTerms::from_row(&row);
         let psnr = psnr_from_mse(f64::from(host[LossTerms::COUNT + 1]));
         if !terms.is_finite() {
-            return Err(BittError::NonFinite(format!(
+            return Err(TrainError::NonFinite(format!(
                 "loss at iteration {}: {terms:?}",
                 self.iteration + 1
             )));
@@ -283,8 +283,8 @@ impl Trainer {
     }
 
     /// The current state as a checkpoint.
-    pub fn checkpoint(&self, seconds: f64) -> Result<Checkpoint, BittError> {
-        let host = |t: &Option<Tensor<1>>| -> Result<Option<Vec<f32>>, BittError> {
+    pub fn checkpoint(&self, seconds: f64) -> Result<Checkpoint, TrainError> {
+        let host = |t: &Option<Tensor<1>>| -> Result<Option<Vec<f32>>, TrainError> {
             t.as_ref().map(|t| read(t.clone())).transpose()
         };
         let s = &self.adam.state;
@@ -307,7 +307,7 @@ impl Trainer {
                 .flatten()
                 .all(|v| finite(v)))
         {
-            return Err(BittError::NonFinite(format!(
+            return Err(TrainError::NonFinite(format!(
                 "the weights or Adam moments after iteration {}",
                 self.iteration
             )));
@@ -321,7 +321,7 @@ impl Trainer {
         &mut self,
         latest: &Checkpoint,
         previous: Option<Checkpoint>,
-    ) -> Result<(), BittError> {
+    ) -> Result<(), TrainError> {
         self.restore(latest)?;
         self.snapshots = previous
             .filter(|p| p.iteration < latest.iteration)
@@ -339,13 +339,13 @@ impl Trainer {
     }
 
     /// Restores a checkpoint (from [`Trainer::checkpoint`] or a file) into this trainer.
-    pub fn restore(&mut self, c: &Checkpoint) -> Result<(), BittError> {
+    pub fn restore(&mut self, c: &Checkpoint) -> Result<(), TrainError> {
         let fresh = {
             let _only_us = NETS_INIT.lock().unwrap_or_else(|e| e.into_inner());
             self.config.nets.init(&self.device)?
         };
         self.nets = load_parameters(fresh, &c.parameters, &self.device).map_err(|e| {
-            BittError::Invalid(format!("checkpoint does not fit the networks: {e}"))
+            TrainError::Invalid(format!("checkpoint does not fit the networks: {e}"))
         })?;
         let inner = self.device.clone().inner();
         let tensor = |v: &Option<Vec<f32>>| {
@@ -365,19 +365,19 @@ impl Trainer {
 
     /// Trains until `config.iterations`, writing `checkpoint_path` every
     /// `config.checkpoint_every` iterations, at the end, and when the observer asks to stop
-    /// (then returns [`BittError::Interrupted`]); the checkpoint it replaces is kept as
+    /// (then returns [`TrainError::Interrupted`]); the checkpoint it replaces is kept as
     /// [`previous_checkpoint_path`].
     ///
     /// A non-finite loss (or non-finite weights) goes back to the last good state, lowers
     /// the learning rate by [`RECOVERY_LR_FACTOR`] (cumulatively) and continues; the state
     /// gone back to is saved at once, so `--resume` never repeats the failure. After
-    /// [`MAX_NON_FINITE`] recoveries it returns [`BittError::RecoveryExhausted`], holding
+    /// [`MAX_NON_FINITE`] recoveries it returns [`TrainError::RecoveryExhausted`], holding
     /// (and having saved) the last good state, whose results can still be written.
     pub fn train(
         &mut self,
         checkpoint_path: Option<&Path>,
         observer: &mut dyn Observer,
-    ) -> Result<(), BittError> {
+    ) -> Result<(), TrainError> {
         let start = Instant::now();
         let seconds = |t: &Trainer| t.seconds_before + start.elapsed().as_secs_f64();
         if self.snapshots.is_empty() {
@@ -420,18 +420,18 @@ impl Trainer {
                                     self.snapshots.remove(0);
                                 }
                                 if stop && !done {
-                                    return Err(BittError::Interrupted(self.iteration));
+                                    return Err(TrainError::Interrupted(self.iteration));
                                 }
                                 None
                             }
-                            Err(BittError::NonFinite(m)) => Some(m),
+                            Err(TrainError::NonFinite(m)) => Some(m),
                             Err(e) => return Err(e),
                         }
                     } else {
                         None
                     }
                 }
-                Err(BittError::NonFinite(message)) => Some(message),
+                Err(TrainError::NonFinite(message)) => Some(message),
                 Err(e) => return Err(e),
             };
             if let Some(message) = failure {
@@ -448,19 +448,19 @@ impl Trainer {
         checkpoint_path: Option<&Path>,
         seconds: f64,
         observer: &mut dyn Observer,
-    ) -> Result<(), BittError> {
+    ) -> Result<(), TrainError> {
         let failed_at = self.iteration;
         // The latest state's own forward pass failed: it is not a state to go back to.
         if self.snapshots.last().is_some_and(|s| !s.verified) && self.snapshots.len() > 1 {
             self.snapshots.pop();
         }
         let Some(good) = self.snapshots.last().cloned() else {
-            return Err(BittError::NonFinite(format!(
+            return Err(TrainError::NonFinite(format!(
                 "{message}; no earlier state to go back to"
             )));
         };
         if !good.verified {
-            return Err(BittError::NonFinite(format!(
+            return Err(TrainError::NonFinite(format!(
                 "{message}; the networks' first forward pass from iteration {} is not finite, \
                  and there is no earlier state to go back to",
                 good.checkpoint.iteration
@@ -506,7 +506,7 @@ impl Trainer {
         };
         observer.recovered(failed_at, &note);
         if exhausted {
-            return Err(BittError::RecoveryExhausted {
+            return Err(TrainError::RecoveryExhausted {
                 message: message.to_string(),
                 count: MAX_NON_FINITE,
                 restored: self.iteration,
@@ -524,7 +524,7 @@ impl Trainer {
         &self,
         hands: &bitt_mesh::TwoHandScene,
         device: &Device,
-    ) -> Result<ViewGeometry, BittError> {
+    ) -> Result<ViewGeometry, TrainError> {
         ViewGeometry::new(&self.assets, hands, device)?
             .with_occlusion(&self.assets, self.view.geometry.occlusion_strength())
     }

@@ -8,7 +8,7 @@ use bitt_render::scene::{PointLight, RenderSettings, UnwrapPlan, UnwrapSettings}
 use bitt_texture::{LayoutGather, TexturePcaTensors};
 use burn::tensor::{Device, Tensor, TensorData};
 
-use crate::BittError;
+use crate::TrainError;
 use crate::assets::{HandAssets, ViewGeometry};
 
 /// The fixed inputs of one training view on the training device: the image `I`, the hand
@@ -47,16 +47,16 @@ impl TrainingView {
         image: &[f32],
         mask: Option<&[f32]>,
         device: &Device,
-    ) -> Result<Self, BittError> {
+    ) -> Result<Self, TrainError> {
         let [h, w] = geometry.size();
         if image.len() != 3 * h * w {
-            return Err(BittError::Invalid(format!(
+            return Err(TrainError::Invalid(format!(
                 "image has {} values; the camera needs 3 x {h} x {w}",
                 image.len()
             )));
         }
         if let Some(i) = image.iter().position(|v| !v.is_finite()) {
-            return Err(BittError::Invalid(format!(
+            return Err(TrainError::Invalid(format!(
                 "image value {i} is {}",
                 image[i]
             )));
@@ -86,7 +86,7 @@ impl TrainingView {
         let mask = match mask {
             Some(m) => {
                 if m.len() != h * w {
-                    return Err(BittError::Invalid(format!(
+                    return Err(TrainError::Invalid(format!(
                         "mask has {} values; the image is {h} x {w}",
                         m.len()
                     )));
@@ -133,10 +133,10 @@ impl TrainingView {
     ///
     /// # Errors
     /// A mask of another size than the view's.
-    pub fn trust_photo(&mut self, keep: &[bool]) -> Result<PhotoTrust, BittError> {
+    pub fn trust_photo(&mut self, keep: &[bool]) -> Result<PhotoTrust, TrainError> {
         let [_, _, h, w] = self.mask.dims();
         if keep.len() != h * w {
-            return Err(BittError::Invalid(format!(
+            return Err(TrainError::Invalid(format!(
                 "the photo mask has {} values; the view is {h} x {w}",
                 keep.len()
             )));
@@ -302,7 +302,7 @@ pub fn forward(
     view: &TrainingView,
     settings: &RenderSettings,
     consistency: Consistency,
-) -> Result<Outputs, BittError> {
+) -> Result<Outputs, TrainError> {
     let with_consistency = consistency != Consistency::Off;
     let [_, _, h, w] = view.image.dims();
     let light = nets.light.predict(view.image.clone());
@@ -323,7 +323,7 @@ pub fn forward(
     ];
     let compact = |x: &Tensor<3>| x.clone().reshape([3, t]);
     let render_with =
-        |textures: [Tensor<3>; 2], light: &PointLight| -> Result<Tensor<4>, BittError> {
+        |textures: [Tensor<3>; 2], light: &PointLight| -> Result<Tensor<4>, TrainError> {
             let image = view.geometry.render_image(
                 assets,
                 gather,
@@ -352,7 +352,7 @@ pub fn forward(
     let albedo_image = albedos.clone().narrow(0, 0, 1);
     let consistency_albedos = with_consistency.then(|| albedos.narrow(0, 1, 3) * view.mask.clone());
     let albedo_chw = albedo_image.clone().reshape([3, h, w]);
-    let unwrap = |i: usize| -> Result<Tensor<3>, BittError> {
+    let unwrap = |i: usize| -> Result<Tensor<3>, TrainError> {
         Ok(view.plans[i]
             .apply(albedo_chw.clone())?
             .texels
@@ -391,9 +391,9 @@ pub fn forward(
 }
 
 /// Reads a tensor back as host `f32`.
-pub fn read<const D: usize>(t: Tensor<D>) -> Result<Vec<f32>, BittError> {
+pub fn read<const D: usize>(t: Tensor<D>) -> Result<Vec<f32>, TrainError> {
     t.into_data()
         .convert::<f32>()
         .try_into_vec::<f32>()
-        .map_err(|e| BittError::Invalid(format!("reading a tensor back: {e:?}")))
+        .map_err(|e| TrainError::Invalid(format!("reading a tensor back: {e:?}")))
 }

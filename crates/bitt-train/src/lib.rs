@@ -1,0 +1,26 @@
+//! The BiTT training core (paper Sec. 3-4): what one scene trains from and how.
+//!
+//! - [`config`]: the trainer's configuration, the `paper` / `quick` / `tiny` presets and the
+//!   range check every configuration of the project uses.
+//! - [`assets`]: hand models, render meshes, texture layouts; one view's geometry.
+//! - [`pipeline`]: the forward pass (scene estimation, coarse stage, fine stage).
+//! - [`losses`]: the paper's loss (eq. 6-10).
+//! - [`optim`], [`checkpoint`], [`trainer`]: Adam, checkpoints, the per-scene trainer.
+//!
+//! This crate knows one training view and its networks. It never knows photos, detectors,
+//! keypoint fits, mesh refinement, run folders, reports or evaluation protocols: those are
+//! `bitt`'s, above it. It writes only the checkpoint files it is handed, atomically.
+
+pub mod assets;
+pub mod checkpoint;
+pub mod config;
+mod error;
+pub mod losses;
+pub mod optim;
+pub mod pipeline;
+pub mod trainer;
+
+pub use config::{LossWeights, OptimConfig, TrainConfig};
+pub use error::TrainError;
+pub use losses::LossTerms;
+pub use trainer::{Observer, Progress, Trainer};
