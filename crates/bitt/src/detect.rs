@@ -359,7 +359,12 @@ fn draw_label(
 /// # Errors
 /// [`BittError::Invalid`] naming the folder.
 pub fn check_detect_out(out: &Path) -> Result<(), BittError> {
-    check_own_folder(out, DETECTION_JSON, "detect-hands", &DETECT_NAMES)
+    Ok(check_own_folder(
+        out,
+        DETECTION_JSON,
+        "detect-hands",
+        &DETECT_NAMES,
+    )?)
 }
 
 /// The names a `detect-hands` folder holds.
@@ -371,7 +376,7 @@ const DETECT_NAMES: [&str; 3] = [KEYPOINTS_JSON, OVERLAY, DETECTION_JSON];
 /// # Errors
 /// A folder that is not an earlier `detect-hands` output, or a write failure.
 pub fn write_detection_folder(out: &Path, files: &DetectionFiles) -> Result<(), BittError> {
-    write_own_folder(
+    Ok(write_own_folder(
         out,
         DETECTION_JSON,
         "detect-hands",
@@ -381,7 +386,7 @@ pub fn write_detection_folder(out: &Path, files: &DetectionFiles) -> Result<(), 
             (OVERLAY.into(), png_bytes(&files.overlay)?),
             (DETECTION_JSON.into(), record_bytes(&files.record)?),
         ],
-    )
+    )?)
 }
 
 /// What `bitt detect-hands` did: the detection, and the message of a hand it did not find.
@@ -435,7 +440,9 @@ pub fn detect_hands_into(
 /// # Errors
 /// A file that is there but is not JSON.
 pub fn read_detection(dir: &Path) -> Result<Option<serde_json::Value>, BittError> {
-    crate::outputs::read_json_if_present(&dir.join(DETECTION_JSON))
+    Ok(crate::outputs::read_json_if_present(
+        &dir.join(DETECTION_JSON),
+    )?)
 }
 
 /// The hands of a [`DETECTION_JSON`] record: per side found, its presence, probability of

@@ -38,6 +38,9 @@ pub enum BittError {
     /// From the training core.
     #[error(transparent)]
     Train(#[from] bitt_train::TrainError),
+    /// From the output files.
+    #[error(transparent)]
+    Output(#[from] bitt_outputs::OutputError),
     /// What was being done (an option and its file, a scene) when `source` went wrong.
     #[error("{context}")]
     Context {

@@ -2,7 +2,9 @@
 //! meshes to relightable UV textures of both hands.
 //!
 //! The training core is `bitt-train`'s, re-exported here under the same paths: [`config`],
-//! [`assets`], [`pipeline`], [`losses`], [`optim`], [`checkpoint`], [`trainer`].
+//! [`assets`], [`pipeline`], [`losses`], [`optim`], [`checkpoint`], [`trainer`]. The files a
+//! user opens are drawn by `bitt-outputs`, re-exported likewise: [`outputs`], [`plot`],
+//! [`viewer`], [`xr_page`], [`avatar_export`].
 //!
 //! - [`config_files`]: the configuration files the commands take (training, refinement, fit).
 //! - [`demo`]: the built-in two-hand demo scene (procedural or any other hands).
@@ -43,7 +45,6 @@
 //!   backends, the network benches, and `bitt gpu-check` (every GPU check in one report);
 //!   [`net_shapes`]: the networks' parameter counts and shapes (`bitt nets`).
 
-pub mod avatar_export;
 pub mod backend_check;
 pub mod baselines;
 pub mod benchmark;
@@ -65,9 +66,7 @@ pub mod lpips_convert;
 pub mod metrics;
 pub mod net_shapes;
 pub mod nets_bench;
-pub mod outputs;
 pub mod pair_metrics;
-pub mod plot;
 pub mod progress;
 pub mod real;
 pub mod refine;
@@ -76,9 +75,8 @@ pub mod run_folder;
 pub mod saved;
 pub mod texture_model;
 pub mod train_scene;
-pub mod viewer;
-pub mod xr_page;
 
+pub use bitt_outputs::{avatar_export, outputs, plot, viewer, xr_page};
 pub use bitt_train::{
     LossTerms, LossWeights, Observer, OptimConfig, Progress, TrainConfig, TrainError, Trainer,
     assets, checkpoint, config, losses, optim, pipeline, trainer,

@@ -37,7 +37,7 @@ type Scored = (ViewScore, Vec<f32>, Vec<f32>, Vec<f32>);
 
 /// Writes a real run's scores ([`crate::real::score_real`]) to [`files::REAL_SCORES`].
 pub fn write_real_scores(out: &Path, scores: &crate::real::RealScores) -> Result<(), BittError> {
-    write_json(&out.join(files::REAL_SCORES), scores)
+    Ok(write_json(&out.join(files::REAL_SCORES), scores)?)
 }
 
 /// Writes a refinement's record into a run folder: `refine.json` (the report and whatever
@@ -50,7 +50,7 @@ pub fn write_refinement(
     [h, w]: [usize; 2],
 ) -> Result<(), BittError> {
     write_png(&dir.join(files::REFINE_OVERLAY), overlay, h, w)?;
-    write_json(&dir.join(files::REFINE), record)
+    Ok(write_json(&dir.join(files::REFINE), record)?)
 }
 
 /// Writes the record of a refinement that ran before training (`train-scene --refine-mesh`):
@@ -96,7 +96,9 @@ pub fn write_training_refinement(
 
 /// The `refine.json` of a run folder, if it has one.
 fn read_refinement(dir: &Path) -> Result<Option<serde_json::Value>, BittError> {
-    crate::outputs::read_json_if_present(&dir.join(files::REFINE))
+    Ok(crate::outputs::read_json_if_present(
+        &dir.join(files::REFINE),
+    )?)
 }
 
 /// A trainer for a synthetic scene: the given (possibly noisy) meshes, the training image

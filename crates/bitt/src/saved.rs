@@ -395,7 +395,7 @@ impl SavedRun {
                 hands: self.novel_pose(k)?,
             });
         }
-        XrAvatar {
+        Ok(XrAvatar {
             convention,
             models: &assets.models,
             hands: &training,
@@ -403,6 +403,6 @@ impl SavedRun {
             material: Material::default(),
             frames,
         }
-        .write(out)
+        .write(out)?)
     }
 }

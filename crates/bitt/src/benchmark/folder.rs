@@ -194,7 +194,10 @@ pub fn write_scene(
 ) -> Result<(), BittError> {
     let name = format!("{}-{:016x}", result.setting.key(), result.seed);
     write_sheet(out, &name, input, sheets, size)?;
-    write_json(&result_path(out, result.setting, result.seed), result)
+    Ok(write_json(
+        &result_path(out, result.setting, result.seed),
+        result,
+    )?)
 }
 
 /// `sheets/{name}.png`: the input, the ground truth and each method at the first novel view

@@ -430,7 +430,12 @@ pub fn keypoint_overlay(
 /// # Errors
 /// [`BittError::Invalid`] naming the folder.
 pub fn check_fit_out(out: &Path) -> Result<(), BittError> {
-    crate::outputs::check_own_folder(out, FIT_JSON, "fit-hands", &FIT_NAMES)
+    Ok(crate::outputs::check_own_folder(
+        out,
+        FIT_JSON,
+        "fit-hands",
+        &FIT_NAMES,
+    )?)
 }
 
 /// The names a `fit-hands` folder may hold.
@@ -475,5 +480,11 @@ pub fn write_fit_outputs(out: &Path, fit: &PhotoFit) -> Result<(), BittError> {
         FIT_JSON.into(),
         json_bytes(&out.join(FIT_JSON), &fit.record())?,
     ));
-    crate::outputs::write_own_folder(out, FIT_JSON, "fit-hands", &FIT_NAMES, &files)
+    Ok(crate::outputs::write_own_folder(
+        out,
+        FIT_JSON,
+        "fit-hands",
+        &FIT_NAMES,
+        &files,
+    )?)
 }

@@ -129,7 +129,7 @@ impl RealInput {
         for v in &views {
             crate::outputs::write_png(&input_dir.join(format!("{}.png", v.name)), &v.image, s, s)?;
         }
-        crate::outputs::write_json(&dir.join(files::INPUT), self)
+        Ok(crate::outputs::write_json(&dir.join(files::INPUT), self)?)
     }
 
     /// The prepared views of a real run in `dir` (exact images from `input/images.safetensors`).

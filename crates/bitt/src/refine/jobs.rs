@@ -451,7 +451,12 @@ pub fn refine_photo_hands(
 /// # Errors
 /// [`BittError::Invalid`] naming the folder.
 pub fn check_refine_out(out: &Path) -> Result<(), BittError> {
-    crate::outputs::check_own_folder(out, crate::files::REFINE, "refine-hands", &REFINE_NAMES)
+    Ok(crate::outputs::check_own_folder(
+        out,
+        crate::files::REFINE,
+        "refine-hands",
+        &REFINE_NAMES,
+    )?)
 }
 
 /// The names a `refine-hands` folder holds.
@@ -483,7 +488,13 @@ pub fn write_refine_outputs(
         (REFINE_OVERLAY.into(), png_file_bytes(&overlay.0, h, w)?),
         (REFINE.into(), json_bytes(&out.join(REFINE), record)?),
     ];
-    crate::outputs::write_own_folder(out, REFINE, "refine-hands", &REFINE_NAMES, &files)
+    Ok(crate::outputs::write_own_folder(
+        out,
+        REFINE,
+        "refine-hands",
+        &REFINE_NAMES,
+        &files,
+    )?)
 }
 
 #[cfg(test)]

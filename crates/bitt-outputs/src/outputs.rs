@@ -6,19 +6,19 @@ use std::path::Path;
 use bitt_mesh::export::{ExportHand, glb_bytes, png_bytes, write_atomically};
 use bitt_texture::TextureLayout;
 
-use crate::BittError;
+use crate::OutputError;
 pub use crate::plot::write_loss_plot;
 
 /// `[3, H, W]` values in `[0, 1]` to an 8-bit RGB image (non-finite values are an error).
-pub fn rgb_image(values: &[f32], h: usize, w: usize) -> Result<image::RgbImage, BittError> {
+pub fn rgb_image(values: &[f32], h: usize, w: usize) -> Result<image::RgbImage, OutputError> {
     if values.len() != 3 * h * w {
-        return Err(BittError::Invalid(format!(
+        return Err(OutputError::Invalid(format!(
             "image has {} values, expected 3 x {h} x {w}",
             values.len()
         )));
     }
     if values.iter().any(|v| !v.is_finite()) {
-        return Err(BittError::NonFinite("image to write".into()));
+        return Err(OutputError::NonFinite("image to write".into()));
     }
     let hw = h * w;
     let mut img = image::RgbImage::new(w as u32, h as u32);
@@ -34,7 +34,7 @@ pub fn rgb_image(values: &[f32], h: usize, w: usize) -> Result<image::RgbImage, 
 pub const PNG_SIGNATURE: &[u8] = b"\x89PNG\r\n\x1a\n";
 
 /// Writes `[3, H, W]` values as a PNG.
-pub fn write_png(path: &Path, values: &[f32], h: usize, w: usize) -> Result<(), BittError> {
+pub fn write_png(path: &Path, values: &[f32], h: usize, w: usize) -> Result<(), OutputError> {
     // An existing file that is not a PNG (a user's, named by mistake) is not replaced.
     bitt_mesh::export::check_replaceable(path, PNG_SIGNATURE, "PNG")?;
     let img = rgb_image(values, h, w)?;
@@ -48,7 +48,7 @@ pub fn mask_rgb(mask: &[f32]) -> Vec<f32> {
 }
 
 /// A compact texture `[3, T]` as a UV image `[3, S, S]` (unused texels black).
-pub fn texture_image(layout: &TextureLayout, compact: &[f32]) -> Result<Vec<f32>, BittError> {
+pub fn texture_image(layout: &TextureLayout, compact: &[f32]) -> Result<Vec<f32>, OutputError> {
     Ok(layout.compact_to_image(compact, [0.0; 3])?)
 }
 
@@ -108,7 +108,7 @@ pub fn write_avatar_glb(
         &bitt_mesh::HandModel,
         &image::RgbImage,
     ); 2],
-) -> Result<(), BittError> {
+) -> Result<(), OutputError> {
     let export: Vec<ExportHand> = hands
         .iter()
         .map(|(name, vertices, model, texture)| ExportHand {
@@ -124,20 +124,20 @@ pub fn write_avatar_glb(
 }
 
 /// Writes JSON (pretty) atomically.
-pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), BittError> {
+pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), OutputError> {
     write_atomically(path, &json_bytes(path, value)?)?;
     Ok(())
 }
 
 /// `value` as the pretty JSON [`write_json`] writes (`path` names the file in the error).
-pub fn json_bytes<T: serde::Serialize>(path: &Path, value: &T) -> Result<Vec<u8>, BittError> {
+pub fn json_bytes<T: serde::Serialize>(path: &Path, value: &T) -> Result<Vec<u8>, OutputError> {
     let text = serde_json::to_string_pretty(value)
-        .map_err(|e| BittError::corrupt(path, format!("cannot encode JSON: {e}")))?;
+        .map_err(|e| OutputError::corrupt(path, format!("cannot encode JSON: {e}")))?;
     Ok(text.into_bytes())
 }
 
 /// `[3, H, W]` values as the PNG bytes [`write_png`] writes.
-pub fn png_file_bytes(values: &[f32], h: usize, w: usize) -> Result<Vec<u8>, BittError> {
+pub fn png_file_bytes(values: &[f32], h: usize, w: usize) -> Result<Vec<u8>, OutputError> {
     Ok(png_bytes(&rgb_image(values, h, w)?)?)
 }
 
@@ -155,7 +155,7 @@ pub fn write_own_folder(
     command: &str,
     names: &[&str],
     files: &[(String, Vec<u8>)],
-) -> Result<(), BittError> {
+) -> Result<(), OutputError> {
     check_own_folder(out, marker, command, names)?;
     bitt_mesh::export::write_folder_atomically(out, files, |d| only_names(d, marker, names))?;
     Ok(())
@@ -179,14 +179,14 @@ fn only_names(dir: &Path, marker: &str, names: &[&str]) -> bool {
 ///
 /// # Errors
 /// A file that is there but cannot be read or is not JSON (naming it).
-pub fn read_json_if_present(path: &Path) -> Result<Option<serde_json::Value>, BittError> {
+pub fn read_json_if_present(path: &Path) -> Result<Option<serde_json::Value>, OutputError> {
     if !path.is_file() {
         return Ok(None);
     }
-    let text = std::fs::read_to_string(path).map_err(|e| BittError::io(path, e))?;
+    let text = std::fs::read_to_string(path).map_err(|e| OutputError::io(path, e))?;
     serde_json::from_str(&text)
         .map(Some)
-        .map_err(|e| BittError::corrupt(path, format!("not JSON: {e}")))
+        .map_err(|e| OutputError::corrupt(path, format!("not JSON: {e}")))
 }
 
 /// Base64 of bytes (for images embedded in the HTML report).
@@ -221,24 +221,24 @@ pub fn overlay_scale(width: usize) -> usize {
 /// user's is overwritten.
 ///
 /// # Errors
-/// [`BittError::Invalid`] naming the folder.
+/// [`OutputError::Invalid`] naming the folder.
 pub fn check_own_folder(
     out: &Path,
     marker: &str,
     command: &str,
     names: &[&str],
-) -> Result<(), BittError> {
+) -> Result<(), OutputError> {
     if out.is_dir() {
-        let mut entries = std::fs::read_dir(out).map_err(|e| BittError::io(out, e))?;
+        let mut entries = std::fs::read_dir(out).map_err(|e| OutputError::io(out, e))?;
         if entries.next().is_some() && !only_names(out, marker, names) {
-            return Err(BittError::Invalid(format!(
+            return Err(OutputError::Invalid(format!(
                 "{}: the folder exists and is not a {command} output (no {marker}); choose \
                  another --out",
                 out.display()
             )));
         }
     } else if out.exists() {
-        return Err(BittError::Invalid(format!(
+        return Err(OutputError::Invalid(format!(
             "{}: exists and is not a folder",
             out.display()
         )));

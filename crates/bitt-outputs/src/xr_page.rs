@@ -5,7 +5,7 @@
 //! The page is self-contained and works offline, from `file://` too, built as the report's
 //! viewer is (`viewer.rs`): the vendored three.js r187 modules, plus
 //! `examples/jsm/webxr/XRHandMeshModel.js` (unchanged, see
-//! `crates/bitt/assets/vendor/three/README.md`), are embedded as `data:` URLs behind an import
+//! `crates/bitt-outputs/assets/vendor/three/README.md`), are embedded as `data:` URLs behind an import
 //! map; the two GLBs are embedded as base64 and parsed with `GLTFLoader.parseAsync` into the
 //! asset cache `XRHandMeshModel` takes (`{'bitt/left.glb': gltf, 'bitt/right.glb': gltf}`),
 //! so its default CDN path is never used.

@@ -22,7 +22,7 @@ use bitt_mesh::model::{JOINT_NAMES, NUM_JOINTS};
 use bitt_mesh::{HandPair, HandParams, Side, TwoHandScene};
 use bitt_render::scene::Material;
 
-use crate::BittError;
+use crate::OutputError;
 
 /// Names of the avatar files in a run folder.
 pub mod files {
@@ -73,16 +73,16 @@ pub struct AvatarFiles<'a> {
 const NAMES: [&str; 2] = ["left_hand", "right_hand"];
 
 impl AvatarFiles<'_> {
-    fn params(scene: &TwoHandScene, side: Side) -> Result<&HandParams, BittError> {
+    fn params(scene: &TwoHandScene, side: Side) -> Result<&HandParams, OutputError> {
         scene.hand(side).ok_or_else(|| {
-            BittError::Invalid(format!(
+            OutputError::Invalid(format!(
                 "the scene has no {side} hand; the avatar needs both"
             ))
         })
     }
 
     /// The rigged avatar's glTF binary.
-    pub fn rigged_glb(&self) -> Result<Vec<u8>, BittError> {
+    pub fn rigged_glb(&self) -> Result<Vec<u8>, OutputError> {
         let mut hands = Vec::new();
         for (i, side) in Side::BOTH.into_iter().enumerate() {
             hands.push(RiggedHand {
@@ -95,7 +95,7 @@ impl AvatarFiles<'_> {
         }
         let mut clip = Vec::new();
         if !self.clip.is_empty() {
-            let keyframe = |s: &TwoHandScene| -> Result<Vec<HandParams>, BittError> {
+            let keyframe = |s: &TwoHandScene| -> Result<Vec<HandParams>, OutputError> {
                 let mut k = Vec::new();
                 for (side, hand) in Side::BOTH.into_iter().zip(&hands) {
                     // The avatar keeps its own shape in every keyframe.
@@ -126,7 +126,7 @@ impl AvatarFiles<'_> {
     }
 
     /// The posed meshes (camera frame) as a glTF binary without a rig.
-    pub fn static_glb(&self) -> Result<Vec<u8>, BittError> {
+    pub fn static_glb(&self) -> Result<Vec<u8>, OutputError> {
         let posed = self.posed()?;
         let hands = self.export_hands(&posed);
         Ok(glb_bytes_with_material(
@@ -136,13 +136,13 @@ impl AvatarFiles<'_> {
     }
 
     /// Both posed hands, camera frame, left then right.
-    fn posed(&self) -> Result<[Vec<bitt_mesh::glam::DVec3>; 2], BittError> {
+    fn posed(&self) -> Result<[Vec<bitt_mesh::glam::DVec3>; 2], OutputError> {
         let posed = self.hands.pose_in_camera(self.models)?;
-        let get = |side: Side| -> Result<_, BittError> {
+        let get = |side: Side| -> Result<_, OutputError> {
             Ok(posed
                 .get(side)
                 .ok_or_else(|| {
-                    BittError::Invalid(format!(
+                    OutputError::Invalid(format!(
                         "the scene has no {side} hand; the avatar needs both"
                     ))
                 })?
@@ -173,7 +173,7 @@ impl AvatarFiles<'_> {
     }
 
     /// Writes `avatar.glb` (rigged) and `avatar_static.glb` into `dir`, each atomically.
-    pub fn write(&self, dir: &Path) -> Result<(), BittError> {
+    pub fn write(&self, dir: &Path) -> Result<(), OutputError> {
         let rigged = self.rigged_glb()?;
         let fixed = self.static_glb()?;
         write_atomically(&dir.join(files::RIGGED), &rigged)?;
@@ -183,7 +183,7 @@ impl AvatarFiles<'_> {
 
     /// Writes the posed hands as `path` (`.obj`) with a material library and one texture PNG
     /// per hand next to it (`STEM.mtl`, `STEM_left_hand.png`, `STEM_right_hand.png`).
-    pub fn write_obj(&self, path: &Path) -> Result<(), BittError> {
+    pub fn write_obj(&self, path: &Path) -> Result<(), OutputError> {
         let posed = self.posed()?;
         Ok(bitt_mesh::export::write_obj(
             path,
@@ -192,7 +192,7 @@ impl AvatarFiles<'_> {
     }
 }
 
-/// What [`SavedRun::export`](crate::saved::SavedRun::export) writes.
+/// What `bitt::saved::SavedRun::export` writes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ExportKind {
     /// The rigged glTF binary (the run's `avatar.glb`).
@@ -204,7 +204,7 @@ pub enum ExportKind {
 }
 
 impl ExportKind {
-    /// What [`SavedRun::export`](crate::saved::SavedRun::export) wrote, for the user: `clip_poses` novel poses in the rigged clip
+    /// What `bitt::saved::SavedRun::export` wrote, for the user: `clip_poses` novel poses in the rigged clip
     /// (0 for another pose, which has no clip).
     pub fn written(self, clip_poses: usize) -> String {
         match self {
@@ -293,8 +293,8 @@ fn opencv_to_gltf() -> DMat4 {
 
 impl XrAvatar<'_> {
     /// The skeletons, left then right, with the avatar's shapes.
-    fn skeletons(&self) -> Result<[XrSkeleton; 2], BittError> {
-        let sk = |side: Side| -> Result<XrSkeleton, BittError> {
+    fn skeletons(&self) -> Result<[XrSkeleton; 2], OutputError> {
+        let sk = |side: Side| -> Result<XrSkeleton, OutputError> {
             let p = AvatarFiles::params(self.hands, side)?;
             Ok(XrSkeleton::new(
                 self.models.get(side),
@@ -309,7 +309,7 @@ impl XrAvatar<'_> {
     ///
     /// # Errors
     /// A pose the avatar's hands cannot take, or textures without a UV layout.
-    pub fn files(&self) -> Result<(Vec<NamedFile>, XrVertexError), BittError> {
+    pub fn files(&self) -> Result<(Vec<NamedFile>, XrVertexError), OutputError> {
         let skeletons = self.skeletons()?;
         let mut out = Vec::new();
         for (i, side) in Side::BOTH.into_iter().enumerate() {
@@ -340,7 +340,7 @@ impl XrAvatar<'_> {
     ///
     /// # Errors
     /// As [`Self::files`]; `dir` a file or a foreign folder (untouched); a write failure.
-    pub fn write(&self, dir: &Path) -> Result<XrVertexError, BittError> {
+    pub fn write(&self, dir: &Path) -> Result<XrVertexError, OutputError> {
         let (files, error) = self.files()?;
         write_folder_atomically(dir, &files, is_xr_export)?;
         Ok(error)
@@ -351,7 +351,7 @@ impl XrAvatar<'_> {
     fn playback(
         &self,
         skeletons: &[XrSkeleton; 2],
-    ) -> Result<(serde_json::Value, XrVertexError), BittError> {
+    ) -> Result<(serde_json::Value, XrVertexError), OutputError> {
         let mut frames = Vec::new();
         let mut sums = [0.0f64; 2];
         let mut maxes = [0.0f64; 2];

@@ -2,7 +2,7 @@
 //! `avatar.glb` with three.js, lit by the estimated light.
 //!
 //! The fragment is self-contained and works offline, from `file://` too: three.js (vendored
-//! in `crates/bitt/assets/vendor/three/`, see its README) is embedded as ES modules behind an
+//! in `crates/bitt-outputs/assets/vendor/three/`, see its README) is embedded as ES modules behind an
 //! import map whose entries are `data:text/javascript;base64,...` URLs, and the GLB is
 //! embedded as base64 and handed to `GLTFLoader.parse`. A data URL has no hierarchy, so the
 //! modules' relative imports (`./three.core.js`, `../utils/...`) are rewritten here to bare
@@ -33,10 +33,10 @@ use std::path::Path;
 
 use bitt_render::scene::LightValues;
 
-use crate::BittError;
+use crate::OutputError;
 use crate::outputs::base64;
 
-/// The vendored three.js release (`crates/bitt/assets/vendor/three/README.md`).
+/// The vendored three.js release (`crates/bitt-outputs/assets/vendor/three/README.md`).
 pub const THREE_VERSION: &str = "0.187.0";
 
 /// The ids of the viewer's elements: canvas, controls, status.
@@ -217,14 +217,14 @@ pub fn viewer_html(glb: &[u8], light: &LightValues) -> String {
 /// written for a run whose light estimate broke down.
 ///
 /// # Errors
-/// [`BittError`] when either file cannot be read or the light is not a JSON object.
-pub fn run_viewer_html(glb_path: &Path, light_path: &Path) -> Result<String, BittError> {
-    let read = |path: &Path| std::fs::read(path).map_err(|e| BittError::io(path, e));
+/// [`OutputError`] when either file cannot be read or the light is not a JSON object.
+pub fn run_viewer_html(glb_path: &Path, light_path: &Path) -> Result<String, OutputError> {
+    let read = |path: &Path| std::fs::read(path).map_err(|e| OutputError::io(path, e));
     let glb = read(glb_path)?;
     let value: serde_json::Value = serde_json::from_slice(&read(light_path)?)
-        .map_err(|e| BittError::corrupt(light_path, format!("not JSON: {e}")))?;
+        .map_err(|e| OutputError::corrupt(light_path, format!("not JSON: {e}")))?;
     if !value.is_object() {
-        return Err(BittError::corrupt(light_path, "not a light"));
+        return Err(OutputError::corrupt(light_path, "not a light"));
     }
     let rgb = |key: &str| -> [f32; 3] {
         std::array::from_fn(|i| value[key][i].as_f64().map_or(f32::NAN, |x| x as f32))

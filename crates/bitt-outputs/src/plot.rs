@@ -22,9 +22,9 @@ use bitt_mesh::export::{png_bytes, write_atomically};
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 
-use crate::BittError;
-use crate::config::OptimConfig;
-use crate::losses::LossTerms;
+use crate::OutputError;
+use bitt_train::config::OptimConfig;
+use bitt_train::losses::LossTerms;
 
 /// The plot's size in pixels. At most 768 wide: the report shows images at up to 48em
 /// (768 px) with nearest-neighbour scaling, which would break the text of a wider one.
@@ -109,9 +109,9 @@ impl Label {
 }
 
 /// The embedded font.
-fn font() -> Result<FontRef<'static>, BittError> {
+fn font() -> Result<FontRef<'static>, OutputError> {
     FontRef::try_from_slice(FONT)
-        .map_err(|e| BittError::Invalid(format!("the embedded plot font cannot be read: {e}")))
+        .map_err(|e| OutputError::Invalid(format!("the embedded plot font cannot be read: {e}")))
 }
 
 /// The glyphs of `text` at pixel scale `size` with their x offsets (advances and kerning),
@@ -191,7 +191,7 @@ fn draw_label(img: &mut image::RgbImage, font: &FontRef<'_>, label: &Label) {
 ///
 /// # Errors
 /// Only if the embedded font cannot be read.
-pub fn text_width(text: &str, size: f32) -> Result<f32, BittError> {
+pub fn text_width(text: &str, size: f32) -> Result<f32, OutputError> {
     Ok(layout(&font()?, text, size).1)
 }
 
@@ -209,7 +209,7 @@ pub fn draw_text(
     size: f32,
     at: (f32, f32),
     color: [u8; 3],
-) -> Result<(), BittError> {
+) -> Result<(), OutputError> {
     let label = Label {
         text: text.to_string(),
         size,
@@ -232,7 +232,7 @@ pub fn write_loss_plot(
     path: &Path,
     history: &[LossTerms],
     schedule: &OptimConfig,
-) -> Result<(), BittError> {
+) -> Result<(), OutputError> {
     let img = loss_plot_image(history, schedule)?;
     write_atomically(path, &png_bytes(&img)?)?;
     Ok(())
@@ -375,8 +375,8 @@ fn curves(history: &[LossTerms]) -> Vec<Curve> {
 }
 
 /// A plotters drawing error as the crate's error.
-fn draw_error(e: impl std::fmt::Display) -> BittError {
-    BittError::Invalid(format!("drawing the loss plot: {e}"))
+fn draw_error(e: impl std::fmt::Display) -> OutputError {
+    OutputError::Invalid(format!("drawing the loss plot: {e}"))
 }
 
 /// The loss plot of `history` as an image of [`PLOT_SIZE`] (see [`write_loss_plot`]).
@@ -386,13 +386,13 @@ fn draw_error(e: impl std::fmt::Display) -> BittError {
 pub fn loss_plot_image(
     history: &[LossTerms],
     schedule: &OptimConfig,
-) -> Result<image::RgbImage, BittError> {
+) -> Result<image::RgbImage, OutputError> {
     let font = font()?;
     let (w, h) = PLOT_SIZE;
     let mut buffer = vec![255u8; 3 * w as usize * h as usize];
     let labels = draw_chart(&mut buffer, &font, history, schedule).map_err(draw_error)?;
     let mut img = image::RgbImage::from_raw(w, h, buffer)
-        .ok_or_else(|| BittError::Invalid("loss plot buffer has the wrong size".into()))?;
+        .ok_or_else(|| OutputError::Invalid("loss plot buffer has the wrong size".into()))?;
     for label in &labels {
         draw_label(&mut img, &font, label);
     }
