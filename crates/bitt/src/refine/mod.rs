@@ -62,6 +62,11 @@ pub struct RefineWeights {
     pub outside: f64,
     /// Uncovered mask pixels to their nearest projected vertex (pixels, pseudo-Huber).
     pub coverage: f64,
+    /// Multiplies `coverage` for the uncovered mask pixels inside the hands' outline (the
+    /// holes between touching fingers, [`holes`]): such a pixel pulls `1 + holes` times as
+    /// hard as one outside. Off (0) by default; 5 closes the demo photos' holes (see
+    /// docs/refinement.md, Holes), but makes short refinements erratic.
+    pub holes: f64,
     /// `|render - I * mask|` per covered-or-mask pixel and channel.
     pub photometric: f64,
     /// Squared finger-pose change from the start (radians^2, mean over values). It also
@@ -84,6 +89,7 @@ impl Default for RefineWeights {
             silhouette: 1.0,
             outside: 0.05,
             coverage: 0.2,
+            holes: 0.0,
             photometric: 1.0,
             pose: 5.0,
             uninformed_pose: 0.1,
@@ -173,6 +179,7 @@ impl RefineConfig {
             ("silhouette", w.silhouette),
             ("outside", w.outside),
             ("coverage", w.coverage),
+            ("holes", w.holes),
             ("photometric", w.photometric),
             ("pose", w.pose),
             ("uninformed_pose", w.uninformed_pose),
@@ -820,20 +827,20 @@ pub fn refine_hands(
                 .len()
                 .div_ceil(config.coverage_samples.max(1))
                 .max(1);
-            let mut pulls: Vec<(i64, f32, f32)> = Vec::new();
-            for &p in uncovered.iter().step_by(stride) {
-                let (qx, qy) = ((p % w) as f32 + 0.5, (p / w) as f32 + 0.5);
-                let mut best = (f32::INFINITY, 0usize);
-                for i in 0..n {
-                    let d = (pxh[i] - qx).powi(2) + (pyh[i] - qy).powi(2);
-                    if d < best.0 {
-                        best = (d, i);
-                    }
-                }
-                if f64::from(best.0.sqrt()) <= coverage_radius {
-                    pulls.push((best.1 as i64, qx, qy));
-                }
-            }
+            let inside = (wts.holes > 0.0).then(|| {
+                let drawn: Vec<bool> = covered_host.iter().map(|&c| c >= 0.5).collect();
+                let radius = (OUTLINE_CLOSING_PX_AT_256 * h.max(w) as f64 / 256.0)
+                    .round()
+                    .max(1.0) as usize;
+                outline(&drawn, [h, w], radius)
+            });
+            let pulls = coverage_pulls(
+                uncovered.iter().step_by(stride).copied(),
+                w,
+                (&pxh, &pyh),
+                coverage_radius,
+                inside.as_deref().map(|i| (i, wts.holes as f32)),
+            );
             let coverage = if pulls.is_empty() {
                 Tensor::<1>::zeros([1], device)
             } else {
@@ -844,10 +851,12 @@ pub fn refine_hands(
                 );
                 let qx = float(pulls.iter().map(|p| p.1).collect(), [k, 1], device);
                 let qy = float(pulls.iter().map(|p| p.2).collect(), [k, 1], device);
+                let weight = float(pulls.iter().map(|p| p.3).collect(), [k, 1], device);
                 let d2 = (px.clone().select(0, idx.clone()) - qx).square()
                     + (py.clone().select(0, idx) - qy).square();
                 // Normalised by the mask area so that the term fades as coverage completes.
-                ((d2 + 1.0).sqrt() - 1.0).sum() / (mask_pixels.len() as f64 / stride as f64)
+                (((d2 + 1.0).sqrt() - 1.0) * weight).sum()
+                    / (mask_pixels.len() as f64 / stride as f64)
             };
 
             let photometric = match &image {
@@ -1318,6 +1327,38 @@ pub fn outline(rendered: &[bool], [h, w]: [usize; 2], radius: usize) -> Vec<bool
     outside.iter().map(|&o| !o).collect()
 }
 
+/// The coverage term's pulls: each uncovered mask pixel `p` (row-major, rows of `w`) pulls
+/// its nearest projected vertex (`xs`, `ys` in pixels) when that lies within `radius`
+/// pixels, as `(vertex, x, y, weight)` with the pixel's centre. The weight is 1, or
+/// `1 + holes` for a pixel inside the hands' outline (`inside`, [`outline`]).
+fn coverage_pulls(
+    uncovered: impl Iterator<Item = usize>,
+    w: usize,
+    (xs, ys): (&[f32], &[f32]),
+    radius: f64,
+    inside: Option<(&[bool], f32)>,
+) -> Vec<(i64, f32, f32, f32)> {
+    let mut pulls = Vec::new();
+    for p in uncovered {
+        let (qx, qy) = ((p % w) as f32 + 0.5, (p / w) as f32 + 0.5);
+        let mut best = (f32::INFINITY, 0usize);
+        for (i, (x, y)) in xs.iter().zip(ys).enumerate() {
+            let d = (x - qx).powi(2) + (y - qy).powi(2);
+            if d < best.0 {
+                best = (d, i);
+            }
+        }
+        if f64::from(best.0.sqrt()) <= radius {
+            let weight = match inside {
+                Some((mask, holes)) if mask[p] => 1.0 + holes,
+                _ => 1.0,
+            };
+            pulls.push((best.1 as i64, qx, qy, weight));
+        }
+    }
+    pulls
+}
+
 /// Holes: the fraction of the photo's hand pixels `hand` `[h, w]` inside the hands' outline
 /// ([`outline`] of the silhouette `drawn`, closed by [`OUTLINE_CLOSING_PX_AT_256`] scaled to
 /// the image) that the silhouette leaves uncovered: skin between and within the hands that no
@@ -1344,6 +1385,26 @@ pub fn holes(drawn: &[bool], hand: &[bool], [h, w]: [usize; 2]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An uncovered pixel pulls its nearest vertex within the radius, `1 + holes` times as
+    /// hard inside the outline; a pixel farther than the radius from every vertex pulls none.
+    #[test]
+    fn holes_pull_harder_than_uncovered_pixels_outside() {
+        let w = 10;
+        let (xs, ys) = ([1.5f32, 8.5], [1.5f32, 1.5]);
+        let mut inside = vec![false; w * w];
+        inside[2] = true; // (2, 0): nearest vertex 0
+        let pulls = coverage_pulls(
+            [2, 7, 99].into_iter(),
+            w,
+            (&xs, &ys),
+            3.0,
+            Some((&inside, 5.0)),
+        );
+        assert_eq!(pulls, vec![(0, 2.5, 0.5, 6.0), (1, 7.5, 0.5, 1.0)]);
+        let plain = coverage_pulls([2].into_iter(), w, (&xs, &ys), 3.0, None);
+        assert_eq!(plain, vec![(0, 2.5, 0.5, 1.0)]);
+    }
 
     #[test]
     fn outline_bridges_slits_and_fills_enclosed_gaps() {
