@@ -364,33 +364,21 @@ mod tests {
         for (g, lo, hi) in [(1.0, 0.30, 0.52), (0.1, 0.0, 0.02)] {
             // The lid faces down; which way it faces does not matter to the rays.
             let (lid, lid_faces) = square(1.0, g);
-            let ao = ambient_occlusion(
-                &[
-                    OccluderMesh {
-                        vertices: &fan,
-                        faces: &fan_faces,
-                    },
-                    OccluderMesh {
-                        vertices: &lid,
-                        faces: &lid_faces,
-                    },
-                ],
-                &settings,
-            )
-            .unwrap();
+            let scene = [
+                OccluderMesh {
+                    vertices: &fan,
+                    faces: &fan_faces,
+                },
+                OccluderMesh {
+                    vertices: &lid,
+                    faces: &lid_faces,
+                },
+            ];
+            let ao = ambient_occlusion(&scene, &settings).unwrap();
             let centre = ao[0][4];
             assert!((lo..=hi).contains(&centre), "lid at {g}: {centre}");
             let far = ambient_occlusion(
-                &[
-                    OccluderMesh {
-                        vertices: &fan,
-                        faces: &fan_faces,
-                    },
-                    OccluderMesh {
-                        vertices: &lid,
-                        faces: &lid_faces,
-                    },
-                ],
+                &scene,
                 &OcclusionSettings {
                     reach: g * 0.5,
                     ..settings

@@ -1,7 +1,5 @@
 //! The error type of the output files.
 
-use std::path::PathBuf;
-
 use bitt_mesh::FileError;
 
 /// Everything that can go wrong drawing or writing what a user opens.
@@ -27,16 +25,4 @@ pub enum OutputError {
     /// From the renderer.
     #[error(transparent)]
     Render(#[from] bitt_render::RenderError),
-}
-
-impl OutputError {
-    /// An I/O error on `path`.
-    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        FileError::io(path, source).into()
-    }
-
-    /// A corrupt file: one that exists but is not what it should be.
-    pub fn corrupt(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
-        FileError::format(path, message).into()
-    }
 }

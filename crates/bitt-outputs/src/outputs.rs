@@ -8,6 +8,7 @@ use bitt_texture::TextureLayout;
 
 use crate::OutputError;
 pub use crate::plot::write_loss_plot;
+use bitt_mesh::FileErrorExt;
 
 /// `[3, H, W]` values in `[0, 1]` to an 8-bit RGB image (non-finite values are an error).
 pub fn rgb_image(values: &[f32], h: usize, w: usize) -> Result<image::RgbImage, OutputError> {
@@ -132,7 +133,7 @@ pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), Out
 /// `value` as the pretty JSON [`write_json`] writes (`path` names the file in the error).
 pub fn json_bytes<T: serde::Serialize>(path: &Path, value: &T) -> Result<Vec<u8>, OutputError> {
     let text = serde_json::to_string_pretty(value)
-        .map_err(|e| OutputError::corrupt(path, format!("cannot encode JSON: {e}")))?;
+        .map_err(|e| OutputError::format(path, format!("cannot encode JSON: {e}")))?;
     Ok(text.into_bytes())
 }
 
@@ -186,7 +187,7 @@ pub fn read_json_if_present(path: &Path) -> Result<Option<serde_json::Value>, Ou
     let text = std::fs::read_to_string(path).map_err(|e| OutputError::io(path, e))?;
     serde_json::from_str(&text)
         .map(Some)
-        .map_err(|e| OutputError::corrupt(path, format!("not JSON: {e}")))
+        .map_err(|e| OutputError::format(path, format!("not JSON: {e}")))
 }
 
 /// Base64 of bytes (for images embedded in the HTML report).

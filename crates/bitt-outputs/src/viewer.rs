@@ -35,6 +35,7 @@ use bitt_render::scene::LightValues;
 
 use crate::OutputError;
 use crate::outputs::base64;
+use bitt_mesh::FileErrorExt;
 
 /// The vendored three.js release (`crates/bitt-outputs/assets/vendor/three/README.md`).
 pub const THREE_VERSION: &str = "0.187.0";
@@ -222,9 +223,9 @@ pub fn run_viewer_html(glb_path: &Path, light_path: &Path) -> Result<String, Out
     let read = |path: &Path| std::fs::read(path).map_err(|e| OutputError::io(path, e));
     let glb = read(glb_path)?;
     let value: serde_json::Value = serde_json::from_slice(&read(light_path)?)
-        .map_err(|e| OutputError::corrupt(light_path, format!("not JSON: {e}")))?;
+        .map_err(|e| OutputError::format(light_path, format!("not JSON: {e}")))?;
     if !value.is_object() {
-        return Err(OutputError::corrupt(light_path, "not a light"));
+        return Err(OutputError::format(light_path, "not a light"));
     }
     let rgb = |key: &str| -> [f32; 3] {
         std::array::from_fn(|i| value[key][i].as_f64().map_or(f32::NAN, |x| x as f32))

@@ -17,6 +17,7 @@ use safetensors::Dtype;
 
 use crate::TrainError;
 use crate::losses::LossTerms;
+use bitt_mesh::FileErrorExt;
 
 /// The `format` metadata of a checkpoint file.
 pub const CHECKPOINT_FORMAT: &str = "bitt-checkpoint-2";
@@ -99,7 +100,7 @@ impl Checkpoint {
             f64_bytes(&[self.lr_scale, self.seconds]),
         ));
         let json = |v: serde_json::Result<String>| {
-            v.map_err(|e| TrainError::corrupt(path, format!("cannot encode metadata: {e}")))
+            v.map_err(|e| TrainError::format(path, format!("cannot encode metadata: {e}")))
         };
         let metadata = HashMap::from([
             ("format".to_string(), CHECKPOINT_FORMAT.to_string()),
@@ -127,7 +128,7 @@ impl Checkpoint {
 
     /// [`Checkpoint::load`] of a file's bytes; `path` names it in errors.
     pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<Self, TrainError> {
-        let bad = |m: String| TrainError::corrupt(path, m);
+        let bad = |m: String| TrainError::format(path, m);
         let r = st::Reader::open(bytes, path)?;
         let meta = r.metadata();
         let get = |k: &str| {
@@ -151,7 +152,7 @@ impl Checkpoint {
             path: &Path,
         ) -> Result<T, TrainError> {
             serde_json::from_str(text)
-                .map_err(|e| TrainError::corrupt(path, format!("metadata `{key}`: {e}")))
+                .map_err(|e| TrainError::format(path, format!("metadata `{key}`: {e}")))
         }
         if !legacy {
             // `st::Reader::open` verified the checksums; a checkpoint must have them.

@@ -5,6 +5,7 @@ use bitt_nets::{BittNetsConfig, Preset};
 use bitt_texture::ProceduralTextureConfig;
 
 use crate::TrainError;
+use bitt_mesh::FileErrorExt;
 
 /// The largest learning rate a configuration may ask for (Adam steps of this size already
 /// destroy the networks; the paper's is 1e-3).
@@ -99,6 +100,22 @@ pub fn check_field(field: &str, value: f64, bounds: Bounds) -> Result<(), TrainE
     }
 }
 
+/// [`check_field`] for several fields of one section: `{section}.{name}` each, all within
+/// `bounds`; the first out of range is refused.
+///
+/// # Errors
+/// As [`check_field`].
+pub fn check_fields(
+    section: &str,
+    fields: &[(&str, f64)],
+    bounds: Bounds,
+) -> Result<(), TrainError> {
+    for (name, value) in fields {
+        check_field(&format!("{section}.{name}"), *value, bounds)?;
+    }
+    Ok(())
+}
+
 /// Reads a configuration file's `text` as `T`, refusing fields `T` does not have (a typo
 /// would otherwise be silently ignored) and naming `path` and the field (`optim.learnig_rate`).
 /// Works for any nesting and any derive (the read value is written back and its keys
@@ -108,15 +125,15 @@ where
     T: serde::Serialize + serde::de::DeserializeOwned,
 {
     let raw: serde_json::Value = serde_json::from_str(text)
-        .map_err(|e| TrainError::corrupt(path, format!("not {what}: {e}")))?;
+        .map_err(|e| TrainError::format(path, format!("not {what}: {e}")))?;
     let value: T = serde_json::from_value(raw.clone())
-        .map_err(|e| TrainError::corrupt(path, format!("not {what}: {e}")))?;
+        .map_err(|e| TrainError::format(path, format!("not {what}: {e}")))?;
     let known = serde_json::to_value(&value)
-        .map_err(|e| TrainError::corrupt(path, format!("not {what}: {e}")))?;
+        .map_err(|e| TrainError::format(path, format!("not {what}: {e}")))?;
     let mut unknown = Vec::new();
     unknown_fields(&raw, &known, "", &mut unknown);
     if !unknown.is_empty() {
-        return Err(TrainError::corrupt(
+        return Err(TrainError::format(
             path,
             format!(
                 "unknown field{} {} in {what} (misspelt? the fields are those of a run's \
@@ -424,16 +441,15 @@ impl TrainConfig {
         check_field("optim.min_learning_rate", o.min_learning_rate, floor)?;
         let w = &self.loss;
         let weight = Bounds::new(0.0, false, MAX_LOSS_WEIGHT, false);
-        for (field, value) in [
+        let terms = [
             ("rec", w.rec),
             ("rec_coarse", w.rec_coarse),
             ("rec_albedo", w.rec_albedo),
             ("nv", w.nv),
             ("alb", w.alb),
             ("sym", w.sym),
-        ] {
-            check_field(&format!("loss.{field}"), value, weight)?;
-        }
+        ];
+        check_fields("loss", &terms, weight)?;
         check_field("loss.photo_mask", w.photo_mask, Bounds::UNIT)?;
         check_field("loss.photo_occlusion", w.photo_occlusion, Bounds::UNIT)?;
         Ok(())
@@ -444,7 +460,7 @@ impl TrainConfig {
     pub fn from_json(text: &str, path: &std::path::Path) -> Result<Self, TrainError> {
         let c: TrainConfig = read_config(text, path, "a training config")?;
         c.validate()
-            .map_err(|e| TrainError::corrupt(path, e.to_string()))?;
+            .map_err(|e| TrainError::format(path, e.to_string()))?;
         Ok(c)
     }
 }

@@ -1,7 +1,5 @@
 //! The error type of the training core.
 
-use std::path::PathBuf;
-
 use bitt_mesh::FileError;
 
 /// Everything that can go wrong preparing a view, in the forward pass, the trainer and its
@@ -50,16 +48,4 @@ pub enum TrainError {
     /// From the synthetic generator.
     #[error(transparent)]
     Synth(#[from] bitt_synth::SynthError),
-}
-
-impl TrainError {
-    /// An I/O error on `path`.
-    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        FileError::io(path, source).into()
-    }
-
-    /// A corrupt file: one that exists but is not what it should be.
-    pub fn corrupt(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
-        FileError::format(path, message).into()
-    }
 }

@@ -16,6 +16,7 @@ use crate::config::TrainConfig;
 use crate::losses::{LossTerms, loss};
 use crate::optim::{Adam, load_parameters, parameters_host};
 use crate::pipeline::{Outputs, TrainingView, forward, read};
+use bitt_mesh::FileErrorExt;
 
 /// Non-finite losses tolerated in one run before giving up.
 pub const MAX_NON_FINITE: usize = 8;

@@ -45,6 +45,9 @@ struct Truth {
     input: TruthView,
     views: Vec<TruthView>,
     poses: Vec<TruthView>,
+    /// Photo scenes: the input view's ambient occlusion at every texel (for
+    /// [`crate::evaluate::albedo_in_shade`]), made once for all methods.
+    input_occlusion: Option<[Vec<f32>; 2]>,
 }
 
 /// What [`Truth::from_views`] needs of a view: its ground-truth hand image, its hands and
@@ -70,10 +73,16 @@ impl Truth {
                 photo,
             })
         };
+        let input = prep(input)?;
+        let input_occlusion = match input.photo {
+            Some(_) => Some(input.geometry.texel_occlusion(&trainer.assets)?),
+            None => None,
+        };
         Ok(Truth {
-            input: prep(input)?,
+            input,
             views: views.iter().map(prep).collect::<Result<_, _>>()?,
             poses: poses.iter().map(prep).collect::<Result<_, _>>()?,
+            input_occlusion,
         })
     }
 
@@ -184,13 +193,10 @@ fn score(
         poses.push(m);
         pose_photos.extend(photo);
     }
-    let shade = match input_photo {
-        Some(_) => {
-            let ao = truth.input.geometry.texel_occlusion(&trainer.assets)?;
-            crate::evaluate::albedo_in_shade(&c.textures, visible, &ao)
-        }
-        None => None,
-    };
+    let shade = truth
+        .input_occlusion
+        .as_ref()
+        .and_then(|ao| crate::evaluate::albedo_in_shade(&c.textures, visible, ao));
     let photo = input_photo.map(|input_view| PhotoScores {
         input_view,
         novel_poses: mean_photo_metrics(&pose_photos),

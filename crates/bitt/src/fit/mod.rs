@@ -37,7 +37,7 @@ use burn::module::{Module, Param};
 use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::BittError;
-use crate::config::{Bounds, OptimConfig, check_field};
+use crate::config::{Bounds, OptimConfig, check_field, check_fields};
 use crate::hand_layer::{HandLayer, HandLayerParams, host_params};
 use crate::hand_priors::{FLEXION_RANGE, HandPriors, flexion_angles, flexion_axes};
 use crate::optim::{Adam, STEP_BOUNDS};
@@ -149,16 +149,18 @@ impl FitConfig {
     /// [`BittError::Invalid`] naming the value.
     pub fn validate(&self) -> Result<(), BittError> {
         check_field("fit.learning_rate", self.learning_rate, STEP_BOUNDS)?;
-        for (name, value) in [
-            ("translation_unit", self.translation_unit),
-            ("shape_unit", self.shape_unit),
-            ("robust_scale_px", self.robust_scale_px),
-            ("restart_residual_px", self.restart_residual_px),
-            ("joint_radius", self.joint_radius),
-            ("hyperextension", self.hyperextension),
-        ] {
-            check_field(&format!("fit.{name}"), value, Bounds::POSITIVE)?;
-        }
+        check_fields(
+            "fit",
+            &[
+                ("translation_unit", self.translation_unit),
+                ("shape_unit", self.shape_unit),
+                ("robust_scale_px", self.robust_scale_px),
+                ("restart_residual_px", self.restart_residual_px),
+                ("joint_radius", self.joint_radius),
+                ("hyperextension", self.hyperextension),
+            ],
+            Bounds::POSITIVE,
+        )?;
         check_field(
             "fit.final_lr_fraction",
             self.final_lr_fraction,
@@ -170,16 +172,18 @@ impl FitConfig {
             ));
         }
         let w = &self.weights;
-        for (name, value) in [
-            ("keypoints", w.keypoints),
-            ("limits", w.limits),
-            ("relaxed_pose", w.relaxed_pose),
-            ("off_axis", w.off_axis),
-            ("shape", w.shape),
-            ("penetration", w.penetration),
-        ] {
-            check_field(&format!("fit.weights.{name}"), value, Bounds::NON_NEGATIVE)?;
-        }
+        check_fields(
+            "fit.weights",
+            &[
+                ("keypoints", w.keypoints),
+                ("limits", w.limits),
+                ("relaxed_pose", w.relaxed_pose),
+                ("off_axis", w.off_axis),
+                ("shape", w.shape),
+                ("penetration", w.penetration),
+            ],
+            Bounds::NON_NEGATIVE,
+        )?;
         Ok(())
     }
 }

@@ -39,7 +39,7 @@ use burn::tensor::{Device, Int, Tensor, TensorData};
 
 use crate::BittError;
 use crate::assets::HandAssets;
-use crate::config::{Bounds, OptimConfig, check_field};
+use crate::config::{Bounds, OptimConfig, check_field, check_fields};
 use crate::hand_layer::{HandLayer, HandLayerParams, has_learned_pose_pca, host_params};
 use crate::hand_priors::HandPriors;
 use crate::metrics::mask_iou;
@@ -160,39 +160,39 @@ impl RefineConfig {
     /// [`BittError::Invalid`] naming the value.
     pub fn validate(&self) -> Result<(), BittError> {
         check_field("refine.learning_rate", self.learning_rate, STEP_BOUNDS)?;
-        for (name, value) in [
-            ("translation_unit", self.translation_unit),
-            ("shape_unit", self.shape_unit),
-            ("uninformed_pose_unit", self.uninformed_pose_unit),
-            ("coverage_radius", self.coverage_radius),
-            ("joint_radius", self.joint_radius),
-        ] {
-            check_field(&format!("refine.{name}"), value, Bounds::POSITIVE)?;
-        }
+        check_fields(
+            "refine",
+            &[
+                ("translation_unit", self.translation_unit),
+                ("shape_unit", self.shape_unit),
+                ("uninformed_pose_unit", self.uninformed_pose_unit),
+                ("coverage_radius", self.coverage_radius),
+                ("joint_radius", self.joint_radius),
+            ],
+            Bounds::POSITIVE,
+        )?;
         check_field(
             "refine.final_lr_fraction",
             self.final_lr_fraction,
             Bounds::UNIT,
         )?;
         let w = &self.weights;
-        for (name, value) in [
-            ("silhouette", w.silhouette),
-            ("outside", w.outside),
-            ("coverage", w.coverage),
-            ("holes", w.holes),
-            ("photometric", w.photometric),
-            ("pose", w.pose),
-            ("uninformed_pose", w.uninformed_pose),
-            ("limits", w.limits),
-            ("shape", w.shape),
-            ("penetration", w.penetration),
-        ] {
-            check_field(
-                &format!("refine.weights.{name}"),
-                value,
-                Bounds::NON_NEGATIVE,
-            )?;
-        }
+        check_fields(
+            "refine.weights",
+            &[
+                ("silhouette", w.silhouette),
+                ("outside", w.outside),
+                ("coverage", w.coverage),
+                ("holes", w.holes),
+                ("photometric", w.photometric),
+                ("pose", w.pose),
+                ("uninformed_pose", w.uninformed_pose),
+                ("limits", w.limits),
+                ("shape", w.shape),
+                ("penetration", w.penetration),
+            ],
+            Bounds::NON_NEGATIVE,
+        )?;
         Ok(())
     }
 }
