@@ -4,8 +4,8 @@
 
 use std::path::PathBuf;
 
+use bitt::export::{ExportHand, glb_bytes};
 use bitt_mesh::annotation::BITT_CROP_SIZE;
-use bitt_mesh::export::{ExportHand, glb_bytes};
 use bitt_mesh::lbs::HandPose;
 use bitt_mesh::{Side, load_bitt_annotation, procedural_pair};
 use bitt_tests::pickle_writer::{PyValue, write_protocol4};

@@ -298,7 +298,7 @@ fn broken_html_pickles_give_named_errors() {
         let e = load_html_model_sized(&p, S).unwrap_err();
         let msg = e.to_string();
         assert!(
-            matches!(e, TextureError::File(bitt_mesh::FileError::Format { .. })),
+            matches!(e, TextureError::File(bitt_stdx::FileError::Format { .. })),
             "{name}: {msg}"
         );
         assert!(
@@ -438,7 +438,7 @@ fn convert_html_writes_a_loadable_safetensors_file() {
     // A folder without a model.
     let e = convert_html(&dir.join("nothing"), &dir.join("out2")).unwrap_err();
     assert!(
-        matches!(e, TextureError::File(bitt_mesh::FileError::Io { .. })),
+        matches!(e, TextureError::File(bitt_stdx::FileError::Io { .. })),
         "{e}"
     );
     let _ = std::fs::remove_dir_all(&dir);

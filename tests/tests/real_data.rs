@@ -320,7 +320,7 @@ fn annotation_run_trains_resumes_and_renders_in_other_poses() {
         &host,
     )
     .unwrap();
-    let fine = bitt::pipeline::read(resumed.forward().unwrap().fine_image.inner()).unwrap();
+    let fine = bitt_stdx::to_host(resumed.forward().unwrap().fine_image.inner()).unwrap();
     let diff = image
         .iter()
         .zip(&fine)
@@ -431,7 +431,7 @@ fn demo_frame_trains_with_procedural_hands_if_present() {
         // The photo is trusted at its hand pixels only (issue 34, bleeding): the meshes
         // overhang dark pixels, which the losses ignore.
         let view = &setup.trainer.view;
-        let read = |t: burn::tensor::Tensor<4>| bitt::pipeline::read(t.inner()).unwrap();
+        let read = |t: burn::tensor::Tensor<4>| bitt_stdx::to_host(t.inner()).unwrap();
         let (weight, drawn, image) = (
             read(view.weight.clone().expect("the photo mask applies")),
             read(view.mask.clone()),
@@ -542,7 +542,7 @@ fn mano_and_html_folders_train_with_the_html_prior() {
     setup.trainer.config.validate().unwrap();
     // The prior's mean (150 / 190 / 230 of 255) is on the hands' 128² layout.
     let t = setup.trainer.assets.num_texels();
-    let coarse = bitt::pipeline::read(setup.trainer.pca.mean.clone().inner()).unwrap();
+    let coarse = bitt_stdx::to_host(setup.trainer.pca.mean.clone().inner()).unwrap();
     assert_eq!(coarse.len(), 3 * t);
     assert!((coarse[t / 2] - 150.0).abs() < 1e-3 && (coarse[2 * t + 5] - 230.0).abs() < 1e-3);
     setup.trainer.train(None, &mut Silent).unwrap();

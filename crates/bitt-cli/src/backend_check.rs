@@ -1,10 +1,10 @@
-//! `bitt backend-check`: the fixed computation of [`bitt::backend_check`] on one backend,
+//! `bitt backend-check`: the fixed computation of [`bitt_bench::backend_check`] on one backend,
 //! printed as one JSON line so `cargo xtask e2e` can compare backends.
 
 use std::time::Instant;
 
 use anyhow::Result;
-use bitt::backend_check::{BackendNumbers, compute};
+use bitt_bench::backend_check::{BackendNumbers, compute};
 
 use crate::device::DeviceName;
 

@@ -2,7 +2,7 @@
 
 use std::sync::OnceLock;
 
-use bitt::gpu_check::AdapterInfo;
+use bitt_bench::gpu_check::AdapterInfo;
 use burn::tensor::{Device, DeviceKind};
 
 /// The backends this binary is built with.

@@ -1,15 +1,15 @@
 //! `bitt eval` and `bitt eval-merge`: the paper's evaluation protocol on the synthetic
-//! benchmark (crate `bitt`, module `benchmark`), resumable and shardable.
+//! benchmark (crate `bitt-bench`, module `benchmark`), resumable and shardable.
 
 use std::path::PathBuf;
 use std::time::Instant;
 
+use crate::progress::EvalBar;
 use anyhow::{Result, bail};
 use bitt::baselines::BaselineConfig;
-use bitt::benchmark::{
+use bitt_bench::benchmark::{
     EvalRun, EvalSource, Evaluation, MeshSetting, Method, parse_scenes, parse_shard, run_evaluation,
 };
-use bitt::progress::EvalBar;
 
 use crate::args::TrainingArgs;
 use crate::device::DeviceName;
@@ -125,7 +125,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let photos = args
         .photos
         .iter()
-        .map(|p| bitt::benchmark::Photo::parse(p))
+        .map(|p| bitt_bench::benchmark::Photo::parse(p))
         .collect::<Result<Vec<_>, _>>()?;
     if !photos.is_empty() && args.dataset != Dataset::Synthetic {
         bail!("--photos brings its own scenes; leave out --dataset");
@@ -184,14 +184,14 @@ pub fn run(args: &EvalArgs) -> Result<()> {
 /// `bitt eval-merge`: merges the scene results of the folders into the tables of the first
 /// and prints them.
 pub fn merge_cmd(args: &MergeArgs) -> Result<()> {
-    println!("{}", bitt::benchmark::merge(&args.dirs)?);
+    println!("{}", bitt_bench::benchmark::merge(&args.dirs)?);
     Ok(())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use bitt::benchmark::SceneResult;
+    use bitt_bench::benchmark::SceneResult;
     use bitt_tests::real_fixture::{
         AnnotationOptions, scratch, write_annotation, write_image, write_mini_interhand,
     };

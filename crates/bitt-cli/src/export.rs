@@ -7,8 +7,8 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use bitt::avatar_export::ExportKind;
+use bitt::export::XrConvention;
 use bitt::saved::SavedRun;
-use bitt_mesh::export::XrConvention;
 
 use crate::avatar_pose::OtherPoseArgs;
 

@@ -15,7 +15,7 @@ use bitt_nets::Preset;
 
 use crate::args::{HandsArgs, KeypointArgs};
 use crate::device::DeviceName;
-use bitt::progress::{FitBar, RefineBar};
+use crate::progress::{FitBar, RefineBar};
 
 /// Arguments of `bitt fit-hands`.
 #[derive(Debug, clap::Args)]

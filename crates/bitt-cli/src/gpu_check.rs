@@ -1,10 +1,10 @@
 //! `bitt gpu-check`: arguments, the wgpu and flex devices, progress lines and the final
-//! table of [`bitt::gpu_check`], written as JSON into `--out`.
+//! table of [`bitt_bench::gpu_check`], written as JSON into `--out`.
 
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use bitt::gpu_check::{AdapterKind, CheckDevices, StageReport, plan_training, run_check};
+use bitt_bench::gpu_check::{AdapterKind, CheckDevices, StageReport, plan_training, run_check};
 use bitt_nets::Preset;
 use burn::tensor::Device;
 

@@ -17,6 +17,7 @@ mod gpu_check;
 mod metrics;
 mod nets;
 mod pose_hands;
+mod progress;
 mod refine_hands;
 mod render;
 mod render_avatar;

@@ -2,8 +2,8 @@
 //! bench-nets` (forward + backward timings of BTR and the albedo U-Net), both as JSON.
 
 use anyhow::Result;
-use bitt::net_shapes::net_shapes;
-use bitt::nets_bench::{BenchedNet, bench_net};
+use bitt_bench::net_shapes::net_shapes;
+use bitt_bench::nets_bench::{BenchedNet, bench_net};
 use bitt_nets::{BittNetsConfig, ConvImpl, Preset};
 
 use crate::device::DeviceName;
@@ -93,7 +93,7 @@ pub fn run(args: &NetsArgs) -> Result<()> {
     Ok(())
 }
 
-/// `bitt bench-nets`: times forward + backward of one network ([`bitt::nets_bench`]);
+/// `bitt bench-nets`: times forward + backward of one network ([`bitt_bench::nets_bench`]);
 /// prints JSON.
 pub fn bench(args: &BenchNetsArgs) -> Result<()> {
     let device = args.device.device()?;

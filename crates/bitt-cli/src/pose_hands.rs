@@ -140,7 +140,7 @@ pub fn run(args: &PoseHandsArgs) -> Result<()> {
     let models = args.hands.models()?;
     let scene = scene(args)?;
     let posed = scene.pose_in_camera(&models)?;
-    posed.write(&models, &args.out, args.glb.as_deref())?;
+    bitt::export::write_posed(&posed, &models, &args.out, args.glb.as_deref())?;
     report_boxes(&scene, &posed, args.json);
     if !args.json {
         println!("wrote {}", args.out.display());

@@ -10,7 +10,7 @@ use bitt_synth::SynthScene;
 
 use crate::args::{HandsArgs, TrainingArgs};
 use crate::device::DeviceName;
-use bitt::progress::RefineBar;
+use crate::progress::RefineBar;
 
 /// Arguments of `bitt refine-hands`.
 #[derive(Debug, clap::Args)]

@@ -7,10 +7,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
+use crate::progress::{SetupLines, TrainBar};
 use anyhow::{Result, bail};
 use bitt::config_files::refine_config;
 use bitt::files;
-use bitt::progress::{SetupLines, TrainBar};
 use bitt::run_folder::{check_utf8_paths, fresh_out, remove_checkpoints};
 use bitt::train_scene::{
     FreshRequest, KeypointInput, SceneInput, finish_run, resumed_run, start_fresh, summary_lines,

@@ -67,13 +67,6 @@ pub struct HandDetector {
     landmark: Network,
 }
 
-fn readback(t: Tensor<2>) -> Result<Vec<f32>, DetectError> {
-    t.into_data()
-        .convert::<f32>()
-        .try_into_vec::<f32>()
-        .map_err(|e| DetectError::Readback(format!("{e:?}")))
-}
-
 impl HandDetector {
     /// The built-in weights on `device`.
     ///
@@ -159,8 +152,8 @@ impl HandDetector {
     pub fn palm_raw(&self, input: Tensor<4>) -> Result<Vec<PalmOutput>, DetectError> {
         let n = input.dims()[0];
         let mut out = self.palm.forward(input)?;
-        let reg = readback(out.remove("Identity").expect("checked output"))?;
-        let logits = readback(out.remove("Identity_1").expect("checked output"))?;
+        let reg = bitt_stdx::to_host(out.remove("Identity").expect("checked output"))?;
+        let logits = bitt_stdx::to_host(out.remove("Identity_1").expect("checked output"))?;
         let per = PALM_ANCHORS * PALM_VALUES;
         Ok((0..n)
             .map(|i| PalmOutput {
@@ -182,7 +175,7 @@ impl HandDetector {
         let mut out = self.landmark.forward(input)?;
         let mut take = |name: &str| -> Result<Vec<f32>, DetectError> {
             match out.remove(name) {
-                Some(t) => readback(t),
+                Some(t) => Ok(bitt_stdx::to_host(t)?),
                 None => Ok(vec![0.0; n * 3 * NUM_LANDMARKS]),
             }
         };

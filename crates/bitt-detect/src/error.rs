@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use bitt_mesh::FileError;
+use bitt_stdx::FileError;
 
 /// Everything that can go wrong when loading the detector or detecting hands.
 #[derive(Debug, thiserror::Error)]
@@ -51,8 +51,8 @@ pub enum DetectError {
         presence: f64,
     },
     /// A tensor that could not be read back from the device.
-    #[error("reading a tensor back: {0}")]
-    Readback(String),
+    #[error(transparent)]
+    Readback(#[from] bitt_stdx::ReadBackError),
 }
 
 impl DetectError {

@@ -11,7 +11,7 @@
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
-use bitt_mesh::st;
+use bitt_stdx::st;
 use half::f16;
 use safetensors::Dtype;
 use serde::{Deserialize, Serialize};

@@ -10,7 +10,11 @@
 //! networks in batches; [`search`] finds the two hands.
 //!
 //! Architecture invariant: this crate knows photos, networks and 2D keypoints only. It never
-//! knows hand meshes, fitting, training or run folders (`bitt` uses it for those).
+//! knows hand meshes, fitting, training or run folders (`bitt-fit` uses it for those).
+//!
+//! Architecture invariant: the weights file (`assets/mediapipe_hands.safetensors`, built
+//! into the binary) is the only place the models live; no code path downloads anything or
+//! needs Python at run time.
 
 #![warn(missing_docs)]
 

@@ -478,7 +478,7 @@ pub fn convert_mediapipe(wheel_dir: &Path, out: &Path) -> Result<Vec<u8>, Detect
     let mut graphs = Vec::new();
     for (name, rel) in WHEEL_MODELS {
         let path = wheel_dir.join(rel);
-        let bytes = bitt_mesh::st::read_file(&path)?;
+        let bytes = bitt_stdx::st::read_file(&path)?;
         graphs.push((name, read_tflite(&bytes, &path)?));
     }
     let refs: Vec<(&str, &Graph)> = graphs.iter().map(|(n, g)| (*n, g)).collect();

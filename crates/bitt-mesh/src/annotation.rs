@@ -6,13 +6,12 @@ use std::path::Path;
 use bitt_pickle::Value;
 use glam::{DMat3, DVec3};
 
-use crate::FileErrorExt;
 use crate::MeshError;
 use crate::camera::{PinholeCamera, PixelBox};
-use crate::export::{ExportHand, write_glb, write_obj};
 use crate::lbs::{HandParams, HandPose, PosedHand, rodrigues};
 use crate::mano::HandPair;
 use crate::model::{NUM_BETAS, NUM_POSE, Side};
+use bitt_stdx::FileErrorExt;
 
 /// Side length of the square crops the BiTT reference cuts from InterHand2.6M frames
 /// (`IMG_SIZE` of its data preparation); the demo annotations' `K` is for this crop.
@@ -60,40 +59,6 @@ impl PosedTwoHands {
             Side::Left => self.left.as_ref(),
             Side::Right => self.right.as_ref(),
         }
-    }
-
-    /// Writes the posed hands (left then right, untextured, named `left_hand` and
-    /// `right_hand`) as an OBJ file and, with `glb`, also as a glTF binary.
-    ///
-    /// # Errors
-    /// Unwritable files.
-    pub fn write(
-        &self,
-        models: &HandPair,
-        obj: &Path,
-        glb: Option<&Path>,
-    ) -> Result<(), MeshError> {
-        let names = ["left_hand", "right_hand"];
-        let hands: Vec<ExportHand> = Side::BOTH
-            .iter()
-            .zip(names)
-            .filter_map(|(&side, name)| {
-                let p = self.get(side)?;
-                let m = models.get(side);
-                Some(ExportHand {
-                    name,
-                    vertices: &p.vertices,
-                    faces: &m.faces,
-                    uv: m.uv.as_ref(),
-                    texture: None,
-                })
-            })
-            .collect();
-        write_obj(obj, &hands)?;
-        if let Some(glb) = glb {
-            write_glb(glb, &hands)?;
-        }
-        Ok(())
     }
 }
 
@@ -515,7 +480,7 @@ pub fn hands_json(scene: &TwoHandScene, models: &HandPair) -> Result<String, Mes
 /// Reads `hands.json` bytes (see [`hands_json`]); `path` names the file in errors.
 ///
 /// # Errors
-/// [`crate::FileError::Format`] for malformed JSON, a wrong `format`, wrong lengths, NaN, no hand,
+/// [`bitt_stdx::FileError::Format`] for malformed JSON, a wrong `format`, wrong lengths, NaN, no hand,
 /// or an invalid rotation or camera.
 pub fn scene_from_hands_json(bytes: &[u8], path: &Path) -> Result<TwoHandScene, MeshError> {
     let file: HandsJson = serde_json::from_slice(bytes)
@@ -818,25 +783,6 @@ mod tests {
             );
             assert!(!e.contains("pickle data") && !e.contains("opcode"), "{e}");
         }
-    }
-
-    /// A one-hand scene writes an OBJ with only that hand and a GLB beside it.
-    #[test]
-    fn posed_hands_write_obj_and_glb() {
-        let models = crate::procedural_pair();
-        let posed = PosedTwoHands {
-            left: None,
-            right: Some(models.right.forward(&HandParams::mean_pose()).unwrap()),
-        };
-        let dir = std::env::temp_dir().join(format!("bitt-posed-write-{}", std::process::id()));
-        let (obj, glb) = (dir.join("h.obj"), dir.join("h.glb"));
-        posed.write(&models, &obj, Some(&glb)).unwrap();
-        let text = std::fs::read_to_string(&obj).unwrap();
-        assert!(text.contains("right_hand") && !text.contains("left_hand"));
-        let vertices = text.lines().filter(|l| l.starts_with("v ")).count();
-        assert_eq!(vertices, models.right.num_vertices());
-        assert!(std::fs::read(&glb).unwrap().starts_with(b"glTF"));
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     fn mano_json() -> serde_json::Value {

@@ -49,9 +49,9 @@ use std::path::{Path, PathBuf};
 
 use serde::de::{DeserializeSeed, IgnoredAny, MapAccess, Visitor};
 
-use crate::FileErrorExt;
 use crate::MeshError;
 use crate::annotation::{InterHandFrame, TwoHandScene, scene_from_interhand_json};
+use bitt_stdx::FileErrorExt;
 
 /// Cameras the reference's data preparation drops (besides every `41xxxx` camera).
 pub const DROP_VIEWS: [&str; 9] = [

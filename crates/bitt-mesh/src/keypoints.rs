@@ -23,8 +23,8 @@ use std::str::FromStr;
 
 use serde_json::{Map, Value};
 
-use crate::FileErrorExt;
 use crate::{MeshError, PinholeCamera, Side};
+use bitt_stdx::FileErrorExt;
 
 /// Number of keypoints per hand (wrist + 5 digits x 4).
 pub const NUM_KEYPOINTS: usize = 21;
@@ -395,7 +395,7 @@ pub fn guess_format(value: &Value) -> Option<KeypointFormat> {
 
 /// Reads keypoints from the bytes of a file; `path` only names the file in errors.
 ///
-/// Errors are [`crate::FileError::Format`] naming `path` and the offending field, e.g.
+/// Errors are [`bitt_stdx::FileError::Format`] naming `path` and the offending field, e.g.
 /// `people[0].hand_left_keypoints_2d: 60 numbers, expected 63 (...)` or
 /// `right[3][1]: not a finite number (found null)`. Never panics.
 pub fn parse_keypoints(
@@ -406,7 +406,7 @@ pub fn parse_keypoints(
     parse(bytes, options).map_err(|detail| MeshError::format(path, detail))
 }
 
-/// Reads a keypoint file (see [`parse_keypoints`]); [`crate::FileError::Io`] naming the file when it
+/// Reads a keypoint file (see [`parse_keypoints`]); [`bitt_stdx::FileError::Io`] naming the file when it
 /// cannot be read.
 pub fn read_keypoints(
     path: &Path,
@@ -1343,7 +1343,7 @@ mod tests {
             Err(e) => e,
         };
         assert!(
-            matches!(e, MeshError::File(crate::FileError::Format { .. })),
+            matches!(e, MeshError::File(bitt_stdx::FileError::Format { .. })),
             "{e:?}"
         );
         let message = e.to_string();
@@ -1906,7 +1906,10 @@ mod tests {
 
         let missing = Path::new("/nonexistent/dir/keypoints.json");
         let e = read_keypoints(missing, &options(None)).unwrap_err();
-        assert!(matches!(e, MeshError::File(crate::FileError::Io { .. })));
+        assert!(matches!(
+            e,
+            MeshError::File(bitt_stdx::FileError::Io { .. })
+        ));
         assert!(
             e.to_string().contains("/nonexistent/dir/keypoints.json"),
             "{e}"

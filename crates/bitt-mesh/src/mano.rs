@@ -12,12 +12,12 @@ use bitt_pickle::{NdArray, Value};
 use glam::{DVec2, DVec3};
 use safetensors::Dtype;
 
-use crate::FileErrorExt;
 use crate::MeshError;
 use crate::model::{
     HandModel, MANO_FINGERTIPS, NUM_BETAS, NUM_JOINTS, NUM_POSE, NUM_POSE_FEATURES, Side, UvLayout,
 };
-use crate::st::{self, Entry, f64_bytes, u32_bytes};
+use bitt_stdx::FileErrorExt;
+use bitt_stdx::st::{self, Entry, f64_bytes, u32_bytes};
 
 /// Value of `kintree_table[0, 0]` in MANO files: the root's "no parent" marker (`u32::MAX`).
 const MANO_ROOT_PARENT: i64 = 4_294_967_295;
@@ -449,7 +449,8 @@ pub fn to_safetensors(model: &HandModel) -> Result<Vec<u8>, MeshError> {
 /// Writes a hand model as safetensors, atomically (a temporary file renamed into place).
 pub fn save_safetensors(model: &HandModel, path: &Path) -> Result<(), MeshError> {
     let bytes = to_safetensors(model)?;
-    crate::export::write_atomically(path, &bytes)
+    bitt_stdx::write_atomically(path, &bytes)?;
+    Ok(())
 }
 
 /// Loads a hand model written by [`save_safetensors`].

@@ -273,3 +273,16 @@ impl HandModel {
         Ok(())
     }
 }
+
+/// Per-vertex normals: area-weighted face normals, normalized (zero where undefined).
+pub fn vertex_normals(vertices: &[DVec3], faces: &[[u32; 3]]) -> Vec<DVec3> {
+    let mut n = vec![DVec3::ZERO; vertices.len()];
+    for f in faces {
+        let [a, b, c] = f.map(|i| vertices[i as usize]);
+        let fn_ = (b - a).cross(c - a);
+        for &i in f {
+            n[i as usize] += fn_;
+        }
+    }
+    n.into_iter().map(|v| v.normalize_or_zero()).collect()
+}

@@ -91,7 +91,7 @@ pub fn ambient_occlusion(
     Ok(meshes
         .iter()
         .map(|mesh| {
-            let normals = crate::export::vertex_normals(mesh.vertices, mesh.faces);
+            let normals = crate::model::vertex_normals(mesh.vertices, mesh.faces);
             mesh.vertices
                 .iter()
                 .zip(&normals)

@@ -13,7 +13,17 @@
 //! Layer choices follow the paper's supplement D and the reference implementation; at the
 //! `paper` preset the parameter counts equal the reference's exactly (a unit test).
 //! Every module is created on a `&Device` and runs on any burn backend. This crate knows
-//! nothing about rendering, files or meshes.
+//! nothing about rendering, files or meshes: tensors in, tensors out.
+//!
+//! On flex, BTR's conv + group norm + SiLU block, its max pooling and the image networks'
+//! conv + instance norm + activation run as custom operations with hand-written backward
+//! passes (`fused`, through burn's `extension` feature); BTR's convolutions are matrix
+//! products over shifted views ([`conv1d`]). Other backends decline the custom operations
+//! and compose burn's own.
+//!
+//! Architecture invariant: a custom operation computes exactly the function of the burn
+//! composition it replaces (tested: values and every gradient), so a model trains the same
+//! on every backend. `fused/gemm.rs` holds the workspace's only `unsafe` library code.
 
 pub mod albedo;
 pub mod btr;

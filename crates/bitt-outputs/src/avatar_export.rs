@@ -12,15 +12,15 @@
 
 use std::path::Path;
 
-use bitt_mesh::export::{
+use crate::export::{
     ExportHand, PbrMaterial, RiggedHand, RiggedScene, XrConvention, XrHand, XrSkeleton,
-    glb_bytes_with_material, rigged_glb_bytes, write_atomically, write_folder_atomically,
-    xr_glb_bytes,
+    glb_bytes_with_material, rigged_glb_bytes, xr_glb_bytes,
 };
-use bitt_mesh::glam::{DMat4, DQuat, DVec3};
-use bitt_mesh::model::{JOINT_NAMES, NUM_JOINTS};
+use bitt_mesh::glam::{DMat4, DQuat};
+use bitt_mesh::model::JOINT_NAMES;
 use bitt_mesh::{HandPair, HandParams, Side, TwoHandScene};
 use bitt_render::scene::Material;
+use bitt_stdx::{write_atomically, write_folder_atomically};
 
 use crate::OutputError;
 
@@ -122,17 +122,14 @@ impl AvatarFiles<'_> {
             seconds_per_pose: SECONDS_PER_POSE,
             clip_name: CLIP_NAME,
         };
-        Ok(rigged_glb_bytes(&scene)?)
+        rigged_glb_bytes(&scene)
     }
 
     /// The posed meshes (camera frame) as a glTF binary without a rig.
     pub fn static_glb(&self) -> Result<Vec<u8>, OutputError> {
         let posed = self.posed()?;
         let hands = self.export_hands(&posed);
-        Ok(glb_bytes_with_material(
-            &hands,
-            &pbr_material(&self.material),
-        )?)
+        glb_bytes_with_material(&hands, &pbr_material(&self.material))
     }
 
     /// Both posed hands, camera frame, left then right.
@@ -185,10 +182,7 @@ impl AvatarFiles<'_> {
     /// per hand next to it (`STEM.mtl`, `STEM_left_hand.png`, `STEM_right_hand.png`).
     pub fn write_obj(&self, path: &Path) -> Result<(), OutputError> {
         let posed = self.posed()?;
-        Ok(bitt_mesh::export::write_obj(
-            path,
-            &self.export_hands(&posed),
-        )?)
+        crate::export::write_obj(path, &self.export_hands(&posed))
     }
 }
 
@@ -268,7 +262,7 @@ pub struct XrVertexError {
 }
 
 /// A trained avatar as two hands for a hand-tracking runtime
-/// ([`bitt_mesh::export::XrSkeleton`]): `left.glb`, `right.glb`, `joints.json`,
+/// ([`crate::export::XrSkeleton`]): `left.glb`, `right.glb`, `joints.json`,
 /// `playback.json` and, for WebXR, `xr.html`.
 #[derive(Debug, Clone)]
 pub struct XrAvatar<'a> {
@@ -296,11 +290,7 @@ impl XrAvatar<'_> {
     fn skeletons(&self) -> Result<[XrSkeleton; 2], OutputError> {
         let sk = |side: Side| -> Result<XrSkeleton, OutputError> {
             let p = AvatarFiles::params(self.hands, side)?;
-            Ok(XrSkeleton::new(
-                self.models.get(side),
-                &p.betas,
-                self.convention,
-            )?)
+            XrSkeleton::new(self.models.get(side), &p.betas, self.convention)
         };
         Ok([sk(Side::Left)?, sk(Side::Right)?])
     }
@@ -380,7 +370,7 @@ impl XrAvatar<'_> {
                 hands.insert(side.as_str().into(), serde_json::json!(matrices));
                 // The file driven by these poses, against the forward pass (same frame).
                 let skinned = sk.skin(&tracked);
-                let lbs = blend_skinning(model, sk, &posed.joint_transforms, world);
+                let lbs = sk.blend_skinning(model, &posed.joint_transforms, world);
                 for (v, s) in skinned.iter().enumerate() {
                     let with = (*s - world.transform_point3(posed.vertices[v])).length();
                     let without = (*s - lbs[v]).length();
@@ -461,35 +451,6 @@ impl XrAvatar<'_> {
             "vertex_error_m": error,
         })
     }
-}
-
-/// The forward pass's linear blend skinning without pose correctives, in `world`.
-fn blend_skinning(
-    model: &bitt_mesh::HandModel,
-    skeleton: &XrSkeleton,
-    joint_transforms: &[DMat4],
-    world: DMat4,
-) -> Vec<DVec3> {
-    let a: Vec<DMat4> = (0..NUM_JOINTS)
-        .map(|m| {
-            world * joint_transforms[m] * DMat4::from_translation(-skeleton.rest_model_joints[m])
-        })
-        .collect();
-    skeleton
-        .rest_vertices
-        .iter()
-        .enumerate()
-        .map(|(v, r)| {
-            let w = &model.skinning_weights[v * NUM_JOINTS..(v + 1) * NUM_JOINTS];
-            let mut m = DMat4::ZERO;
-            for (j, &x) in w.iter().enumerate() {
-                if x != 0.0 {
-                    m += a[j] * x;
-                }
-            }
-            m.transform_point3(*r)
-        })
-        .collect()
 }
 
 /// Whether `dir` is an earlier XR export (its `joints.json` says so).

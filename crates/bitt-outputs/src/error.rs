@@ -1,6 +1,6 @@
 //! The error type of the output files.
 
-use bitt_mesh::FileError;
+use bitt_stdx::FileError;
 
 /// Everything that can go wrong drawing or writing what a user opens.
 #[derive(Debug, thiserror::Error)]

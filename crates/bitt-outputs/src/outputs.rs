@@ -3,12 +3,13 @@
 
 use std::path::Path;
 
-use bitt_mesh::export::{ExportHand, glb_bytes, png_bytes, write_atomically};
+use crate::export::{ExportHand, glb_bytes, png_bytes};
+use bitt_stdx::write_atomically;
 use bitt_texture::TextureLayout;
 
 use crate::OutputError;
 pub use crate::plot::write_loss_plot;
-use bitt_mesh::FileErrorExt;
+use bitt_stdx::FileErrorExt;
 
 /// `[3, H, W]` values in `[0, 1]` to an 8-bit RGB image (non-finite values are an error).
 pub fn rgb_image(values: &[f32], h: usize, w: usize) -> Result<image::RgbImage, OutputError> {
@@ -37,7 +38,7 @@ pub const PNG_SIGNATURE: &[u8] = b"\x89PNG\r\n\x1a\n";
 /// Writes `[3, H, W]` values as a PNG.
 pub fn write_png(path: &Path, values: &[f32], h: usize, w: usize) -> Result<(), OutputError> {
     // An existing file that is not a PNG (a user's, named by mistake) is not replaced.
-    bitt_mesh::export::check_replaceable(path, PNG_SIGNATURE, "PNG")?;
+    bitt_stdx::check_replaceable(path, PNG_SIGNATURE, "PNG")?;
     let img = rgb_image(values, h, w)?;
     write_atomically(path, &png_bytes(&img)?)?;
     Ok(())
@@ -139,11 +140,11 @@ pub fn json_bytes<T: serde::Serialize>(path: &Path, value: &T) -> Result<Vec<u8>
 
 /// `[3, H, W]` values as the PNG bytes [`write_png`] writes.
 pub fn png_file_bytes(values: &[f32], h: usize, w: usize) -> Result<Vec<u8>, OutputError> {
-    Ok(png_bytes(&rgb_image(values, h, w)?)?)
+    png_bytes(&rgb_image(values, h, w)?)
 }
 
 /// Writes the output folder of a command (`fit-hands`, `refine-hands`, `detect-hands`) as a
-/// whole ([`bitt_mesh::export::write_folder_atomically`]): a kill leaves the earlier folder or
+/// whole ([`bitt_stdx::write_folder_atomically`]): a kill leaves the earlier folder or
 /// the new one, never a mix of the two. `names` are all the names the command writes (the
 /// `files` are some of them), `marker` the one that marks its output. An existing folder is
 /// replaced only when it is ours ([`check_own_folder`]); anything else is refused.
@@ -158,7 +159,7 @@ pub fn write_own_folder(
     files: &[(String, Vec<u8>)],
 ) -> Result<(), OutputError> {
     check_own_folder(out, marker, command, names)?;
-    bitt_mesh::export::write_folder_atomically(out, files, |d| only_names(d, marker, names))?;
+    bitt_stdx::write_folder_atomically(out, files, |d| only_names(d, marker, names))?;
     Ok(())
 }
 

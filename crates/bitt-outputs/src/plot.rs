@@ -17,8 +17,9 @@
 
 use std::path::Path;
 
+use crate::export::png_bytes;
 use ab_glyph::{Font, FontRef, PxScale, ScaleFont, point};
-use bitt_mesh::export::{png_bytes, write_atomically};
+use bitt_stdx::write_atomically;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 

@@ -35,7 +35,7 @@ use bitt_render::scene::LightValues;
 
 use crate::OutputError;
 use crate::outputs::base64;
-use bitt_mesh::FileErrorExt;
+use bitt_stdx::FileErrorExt;
 
 /// The vendored three.js release (`crates/bitt-outputs/assets/vendor/three/README.md`).
 pub const THREE_VERSION: &str = "0.187.0";

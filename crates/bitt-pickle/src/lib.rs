@@ -25,6 +25,11 @@
 //! and shared references may expand the input only by a bounded factor. Every error names
 //! the source and the byte offset of the opcode at fault.
 //!
+//! Modules, lowest first: `error`, `value`, `numpy`, `storage` (torch typed storages),
+//! `machine` (the opcode interpreter), `convert` (the machine's objects to [`Value`]s),
+//! `torch` (checkpoints); each imports only modules before it. The readers are fuzzed
+//! (`fuzz/`, `cargo xtask fuzz`): no input may make them panic.
+//!
 //! Values come out as plain data ([`Value`]): Python 2 `str` is decoded as latin-1, numpy
 //! arrays are always in C order (Fortran-ordered data is transposed on reading), numpy
 //! scalars are 0-d arrays, and chumpy objects are evaluated (`Ch` to its `x`, `Select` to

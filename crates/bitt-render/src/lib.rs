@@ -17,6 +17,12 @@
 //!   hands; on a GPU without host readback), image-to-UV unwrapping with visible masks, and
 //!   the paper's texel visibility statistics (Table 3).
 //!
+//! Architecture invariant: [`cpu`] and [`ops`] know triangles, attributes and images only;
+//! [`scene`] knows meshes with UV layouts, cameras and lights, never hand models, texture
+//! PCA or networks. Every gradient is burn autodiff of a tensor expression or a hand-written
+//! backward pass checked against finite differences; the CPU core's backward passes are the
+//! reference the [`ops`] gradients are tested against.
+//!
 //! # Conventions
 //! * **Input** positions are clip space `[V][4]` = (x, y, z, w) as produced by a projection;
 //!   NDC = xyz / w.

@@ -1,6 +1,6 @@
 //! Mild camera degradation of the training image: lens blur, sensor noise, JPEG.
 
-use bitt_mesh::st;
+use bitt_stdx::st;
 use bitt_texture::procedural::noise::SplitMix64;
 use image::codecs::jpeg::JpegEncoder;
 use image::{ImageBuffer, Rgb};
@@ -95,7 +95,7 @@ fn blur(image: &[f32], size: usize, sigma: f64) -> Vec<f32> {
 /// The image as an 8-bit file holds it: every value clamped to [0, 1] and rounded to the
 /// nearest `k / 255`. The generator's ground-truth images are 8-bit, as the rendered
 /// datasets of the paper (saved as PNG) and every photograph are; that also lets a run keep
-/// them as bytes (`bitt_mesh::st::unit_entry`).
+/// them as bytes (`bitt_stdx::st::unit_entry`).
 pub fn to_8bit(image: &[f32]) -> Vec<f32> {
     image
         .iter()

@@ -1,6 +1,6 @@
 //! The one error type of this crate.
 
-use bitt_mesh::FileError;
+use bitt_stdx::FileError;
 
 /// Everything that can go wrong generating, writing or reading a synthetic scene.
 #[derive(Debug, thiserror::Error)]
@@ -19,6 +19,9 @@ pub enum SynthError {
     /// version...).
     #[error(transparent)]
     File(#[from] FileError),
+    /// A tensor that could not be read back from its device.
+    #[error(transparent)]
+    ReadBack(#[from] bitt_stdx::ReadBackError),
     /// A configuration value out of its range.
     #[error("invalid synthetic-scene configuration: {0}")]
     Config(String),

@@ -21,10 +21,11 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use bitt_mesh::export::write_atomically;
-use bitt_mesh::st::{self, f32_bytes};
-use bitt_mesh::{FileErrorExt, TwoHandScene};
+use bitt_mesh::TwoHandScene;
 use bitt_render::scene::LightValues;
+use bitt_stdx::FileErrorExt;
+use bitt_stdx::st::{self, f32_bytes};
+use bitt_stdx::write_atomically;
 use burn::tensor::Device;
 use safetensors::Dtype;
 

@@ -19,12 +19,6 @@ use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::SynthError;
 
-/// Reads a tensor back to the host.
-pub(crate) fn host<const D: usize>(t: Tensor<D>) -> Result<Vec<f32>, SynthError> {
-    t.try_into_vec_as::<f32>()
-        .map_err(|e| SynthError::Generate(format!("reading a tensor back from the device: {e:?}")))
-}
-
 /// The render mesh of a hand model: its faces and vertex count, with the texture
 /// coordinates of its UV layout. The one way a [`HandModel`] becomes a [`TexturedMesh`]
 /// (the synthetic scenes, the trainer's `HandAssets`, `bitt render`'s figures).
@@ -152,11 +146,14 @@ impl HandRenderer {
             &light.to_light(&self.device),
             &RenderSettings::default(),
         )?;
-        let image = host(out.image.clone())?
+        let image = bitt_stdx::to_host(out.image.clone())?
             .into_iter()
             .map(|x| if x.is_nan() { 0.0 } else { x.clamp(0.0, 1.0) })
             .collect();
-        let masks = [host(out.masks[0].clone())?, host(out.masks[1].clone())?];
+        let masks = [
+            bitt_stdx::to_host(out.masks[0].clone())?,
+            bitt_stdx::to_host(out.masks[1].clone())?,
+        ];
         Ok(RenderedView {
             image,
             masks,

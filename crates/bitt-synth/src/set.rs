@@ -163,7 +163,7 @@ pub fn write_scene_set(
     let stats_path = out.join("stats.json");
     let text = serde_json::to_string_pretty(&summary)
         .map_err(|e| SynthError::Generate(format!("cannot encode stats.json: {e}")))?;
-    bitt_mesh::export::write_atomically(&stats_path, text.as_bytes())?;
+    bitt_stdx::write_atomically(&stats_path, text.as_bytes())?;
     let sheet = crate::contact_sheet(&sheet)?;
     let sheet_path = out.join("contact.png");
     bitt_texture::save_png8(&sheet_path, &sheet.0, sheet.1, sheet.2)?;

@@ -1,6 +1,6 @@
 //! The one error type of this crate.
 
-use bitt_mesh::FileError;
+use bitt_stdx::FileError;
 
 /// Everything that can go wrong with layouts, texture models and texture images.
 #[derive(Debug, thiserror::Error)]
@@ -15,6 +15,9 @@ pub enum TextureError {
     /// wrong shape, ...).
     #[error(transparent)]
     File(#[from] FileError),
+    /// A tensor that could not be read back from its device.
+    #[error(transparent)]
+    ReadBack(#[from] bitt_stdx::ReadBackError),
     /// Arguments that do not fit (wrong lengths, NaN, empty layouts, ...).
     #[error("{0}")]
     Invalid(String),

@@ -25,9 +25,10 @@
 
 use std::path::{Path, PathBuf};
 
+use bitt_mesh::UvLayout;
 use bitt_mesh::glam::DVec2;
-use bitt_mesh::{FileErrorExt, UvLayout};
 use bitt_pickle::{ArrayData, NdArray, Value};
+use bitt_stdx::FileErrorExt;
 
 use crate::TextureError;
 use crate::layout::TextureLayout;
@@ -54,7 +55,7 @@ pub fn load_html_model(path: &Path) -> Result<TexturePca, TextureError> {
 /// layout takes the texel order of the red entries, and rows of `mean` / `basis` are
 /// permuted into this crate's channel-major `[3, T]` order when the file orders channels
 /// or texels differently (HTML itself writes three channel blocks in one texel order, which
-/// needs no permutation). Fails with a [`bitt_mesh::FileError::Format`] naming the file and key when
+/// needs no permutation). Fails with a [`bitt_stdx::FileError::Format`] naming the file and key when
 /// a key is missing, an array has the wrong dtype or shape, or `index_map` is out of range,
 /// repeats an entry or gives channels different texels.
 pub fn load_html_model_sized(path: &Path, size: usize) -> Result<TexturePca, TextureError> {

@@ -10,7 +10,7 @@ use std::collections::HashMap;
 use std::io::Cursor;
 use std::path::Path;
 
-use bitt_mesh::FileErrorExt;
+use bitt_stdx::FileErrorExt;
 use image::{ImageBuffer, ImageFormat, Rgb};
 use safetensors::Dtype;
 
@@ -125,7 +125,7 @@ where
     let mut bytes = Vec::new();
     buf.write_to(&mut Cursor::new(&mut bytes), ImageFormat::Png)
         .map_err(|e| TextureError::format(path, format!("cannot encode PNG: {e}")))?;
-    bitt_mesh::export::write_atomically(path, &bytes)?;
+    bitt_stdx::write_atomically(path, &bytes)?;
     Ok(())
 }
 
@@ -411,13 +411,13 @@ mod tests {
         std::fs::write(&junk, b"\x89PNG\r\n\x1a\nnot really").unwrap();
         let e = load_image(&junk).unwrap_err();
         assert!(
-            matches!(e, TextureError::File(bitt_mesh::FileError::Format { .. })),
+            matches!(e, TextureError::File(bitt_stdx::FileError::Format { .. })),
             "{e}"
         );
         assert!(e.to_string().contains("junk.png"));
         let e = load_image(&dir.join("absent.png")).unwrap_err();
         assert!(
-            matches!(e, TextureError::File(bitt_mesh::FileError::Io { .. }))
+            matches!(e, TextureError::File(bitt_stdx::FileError::Io { .. }))
                 && e.to_string().contains("absent.png")
         );
         let _ = std::fs::remove_dir_all(&dir);

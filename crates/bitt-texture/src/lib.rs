@@ -6,6 +6,14 @@
 //! the HTML loaders ([`html`]), the project's own procedural skin model ([`procedural`]),
 //! PCA models resampled onto another layout ([`resample`]) and texture images on disk
 //! ([`image_io`]). It knows nothing about networks or rendering.
+//!
+//! Architecture invariant: every texture the project stores is in one compact order
+//! (`[3, T]`, channel-major, the layout's texel order), and both hands' layouts have the
+//! same texels in the same order: texel `i` of the left texture is texel `i` of the right,
+//! which BTR's left/right symmetry relies on.
+//!
+//! The procedural PCA is fitted on all cores with the same result, bit for bit, for any
+//! number of threads ([`FitProgress`] reports each stage).
 
 pub mod error;
 pub mod html;
@@ -14,7 +22,7 @@ pub mod layout;
 pub mod pca;
 pub mod procedural;
 pub mod resample;
-use bitt_mesh::st;
+use bitt_stdx::st;
 
 pub use error::TextureError;
 pub use html::{

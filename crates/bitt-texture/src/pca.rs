@@ -548,7 +548,7 @@ impl TexturePca {
         gram_stage.finish();
         let eigen = StageCounter::new(progress, FitStage::Eigen, 1);
         let (u, s, _vt) = burn::linalg::svd::<2, 1>(gram, SVD_SWEEPS);
-        let s: Vec<f32> = read(s)?;
+        let s: Vec<f32> = bitt_stdx::to_host(s)?;
         eigen.finish();
         let basis_stage = StageCounter::new(progress, FitStage::Basis, 1 + d.div_ceil(BASIS_BLOCK));
         let u_k = u.narrow(1, 0, k);
@@ -556,7 +556,7 @@ impl TexturePca {
             .transpose()
             .matmul(u_k)
             .mul_scalar(1.0 / ((n - 1) as f64).sqrt());
-        let mut basis: Vec<f32> = read(basis_t.reshape([d * k]))?;
+        let mut basis: Vec<f32> = bitt_stdx::to_host(basis_t.reshape([d * k]))?;
         basis_stage.step();
         flip_to_positive_peaks(&mut basis, k, &basis_stage);
         basis_stage.finish();
@@ -765,14 +765,6 @@ impl TexturePcaTensors {
             .clamp(0.0, 1.0)
             .reshape([b, 3, n / 3])
     }
-}
-
-/// Reads a tensor back as `f32` values.
-pub(crate) fn read<const D: usize>(t: Tensor<D>) -> Result<Vec<f32>, TextureError> {
-    t.try_into_data()
-        .map_err(|e| TextureError::Invalid(format!("reading a tensor back: {e:?}")))?
-        .try_into_vec_as::<f32>()
-        .map_err(|e| TextureError::Invalid(format!("reading a tensor back: {e:?}")))
 }
 
 /// Negates the basis columns (`[d, k]` row-major) whose largest entry in magnitude (the
@@ -1265,12 +1257,12 @@ mod tests {
         let x = Tensor::<2>::from_data(TensorData::new(centred, [n, d]), device);
         let gram = x.clone().matmul(x.clone().transpose());
         let (u, s, _vt) = burn::linalg::svd::<2, 1>(gram, SVD_SWEEPS);
-        let s: Vec<f32> = read(s).unwrap();
+        let s: Vec<f32> = bitt_stdx::to_host(s).unwrap();
         let basis_t = x
             .transpose()
             .matmul(u.narrow(1, 0, k))
             .mul_scalar(1.0 / ((n - 1) as f64).sqrt());
-        let mut basis: Vec<f32> = read(basis_t.reshape([d * k])).unwrap();
+        let mut basis: Vec<f32> = bitt_stdx::to_host(basis_t.reshape([d * k])).unwrap();
         for c in 0..k {
             let (mut big, mut sign) = (0f32, 1f32);
             for r in 0..d {
@@ -1511,7 +1503,7 @@ mod tests {
         let missing = dir.join("missing.safetensors");
         let msg = TexturePca::load_safetensors(&missing).unwrap_err();
         assert!(
-            matches!(msg, TextureError::File(bitt_mesh::FileError::Io { .. })),
+            matches!(msg, TextureError::File(bitt_stdx::FileError::Io { .. })),
             "{msg}"
         );
         // A file of the right format without `basis`.

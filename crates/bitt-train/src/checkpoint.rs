@@ -4,7 +4,7 @@
 //! Format `bitt-checkpoint-2`: tensors `param.i`, `adam_m.i`, `adam_v.i` (F32), `history`
 //! (F64 `[iterations, LossTerms::COUNT + 1]`: the loss terms and the total, bit-exact) and `progress` (F64
 //! `[lr_scale, seconds]`); metadata `iteration`, `parameters`, `adam_steps`, `events`,
-//! `tensors` (how many), and the `checksums` and `metadata_checksum` that [`bitt_mesh::st`]
+//! `tensors` (how many), and the `checksums` and `metadata_checksum` that [`bitt_stdx::st`]
 //! writes into every file (and verifies). Every count, checksum and shape is verified on
 //! load, and what is wrong is named. Files of the earlier format `bitt-checkpoint-1`
 //! (progress as JSON text, no checksums) are still read.
@@ -12,12 +12,12 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use bitt_mesh::st;
+use bitt_stdx::st;
 use safetensors::Dtype;
 
 use crate::TrainError;
 use crate::losses::LossTerms;
-use bitt_mesh::FileErrorExt;
+use bitt_stdx::FileErrorExt;
 
 /// The `format` metadata of a checkpoint file.
 pub const CHECKPOINT_FORMAT: &str = "bitt-checkpoint-2";

@@ -5,7 +5,7 @@ use bitt_nets::{BittNetsConfig, Preset};
 use bitt_texture::ProceduralTextureConfig;
 
 use crate::TrainError;
-use bitt_mesh::FileErrorExt;
+use bitt_stdx::FileErrorExt;
 
 /// The largest learning rate a configuration may ask for (Adam steps of this size already
 /// destroy the networks; the paper's is 1e-3).

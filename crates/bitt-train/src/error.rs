@@ -1,6 +1,6 @@
 //! The error type of the training core.
 
-use bitt_mesh::FileError;
+use bitt_stdx::FileError;
 
 /// Everything that can go wrong preparing a view, in the forward pass, the trainer and its
 /// checkpoints.
@@ -13,6 +13,9 @@ pub enum TrainError {
     /// it should be ([`FileError::Format`]).
     #[error(transparent)]
     File(#[from] FileError),
+    /// A tensor that could not be read back from its device.
+    #[error(transparent)]
+    ReadBack(#[from] bitt_stdx::ReadBackError),
     /// A loss or output that is not finite.
     #[error("non-finite value: {0}")]
     NonFinite(String),

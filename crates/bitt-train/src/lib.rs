@@ -10,6 +10,15 @@
 //! This crate knows one training view and its networks. It never knows photos, detectors,
 //! keypoint fits, mesh refinement, run folders, reports or evaluation protocols: those are
 //! `bitt`'s, above it. It writes only the checkpoint files it is handed, atomically.
+//!
+//! Architecture invariant: a [`assets::ViewGeometry`]'s vertices never change, so what a
+//! render needs from them is computed once per render setting and every later render only
+//! shades; moving geometry (the refinement in `bitt-fit`) renders through the renderer's
+//! primitives and `bitt_render::scene::render` instead.
+//!
+//! Architecture invariant: initial weights are drawn on the seeded host backend and copied to
+//! the training device, so every backend starts a run from the same networks; seeding and
+//! drawing are one step under [`trainer::NETS_INIT`].
 
 pub mod assets;
 pub mod checkpoint;

@@ -122,12 +122,7 @@ pub fn parameters_host<M: Module>(module: &M) -> Vec<(Vec<usize>, Vec<f32>)> {
         fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
             let t = param.val();
             let dims = t.dims().to_vec();
-            let data = t
-                .inner()
-                .into_data()
-                .convert::<f32>()
-                .try_into_vec::<f32>()
-                .unwrap_or_default();
+            let data = bitt_stdx::to_host(t.inner()).unwrap_or_default();
             self.0.push((dims, data));
         }
     }

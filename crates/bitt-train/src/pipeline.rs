@@ -5,6 +5,7 @@ use bitt_render::scene::LightValuesExt;
 
 use bitt_nets::{BittNets, LightParams, compose_texels};
 use bitt_render::scene::{PointLight, RenderSettings, UnwrapPlan, UnwrapSettings};
+use bitt_stdx::to_host;
 use bitt_texture::{LayoutGather, TexturePcaTensors};
 use burn::tensor::{Device, Tensor, TensorData};
 
@@ -141,7 +142,7 @@ impl TrainingView {
                 keep.len()
             )));
         }
-        let drawn = read(self.mask.clone().inner())?;
+        let drawn = to_host(self.mask.clone().inner())?;
         let on_mesh = drawn.iter().filter(|&&m| m > 0.5).count();
         let kept = drawn
             .iter()
@@ -388,12 +389,4 @@ pub fn forward(
         albedo_render,
         consistency_albedos,
     })
-}
-
-/// Reads a tensor back as host `f32`.
-pub fn read<const D: usize>(t: Tensor<D>) -> Result<Vec<f32>, TrainError> {
-    t.into_data()
-        .convert::<f32>()
-        .try_into_vec::<f32>()
-        .map_err(|e| TrainError::Invalid(format!("reading a tensor back: {e:?}")))
 }

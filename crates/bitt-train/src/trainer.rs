@@ -15,8 +15,9 @@ use crate::checkpoint::Checkpoint;
 use crate::config::TrainConfig;
 use crate::losses::{LossTerms, loss};
 use crate::optim::{Adam, load_parameters, parameters_host};
-use crate::pipeline::{Outputs, TrainingView, forward, read};
-use bitt_mesh::FileErrorExt;
+use crate::pipeline::{Outputs, TrainingView, forward};
+use bitt_stdx::FileErrorExt;
+use bitt_stdx::to_host;
 
 /// Non-finite losses tolerated in one run before giving up.
 pub const MAX_NON_FINITE: usize = 8;
@@ -261,7 +262,7 @@ impl Trainer {
             .square()
             .mean()
             .reshape([1]);
-        let host = read(Tensor::cat(vec![stacked, psnr_mse], 0))?;
+        let host = to_host(Tensor::cat(vec![stacked, psnr_mse], 0))?;
         // The terms and the total, then the PSNR's squared error.
         let mut row = [0.0; LossTerms::COUNT + 1];
         for (r, &v) in row.iter_mut().zip(&host) {
@@ -286,7 +287,7 @@ impl Trainer {
     /// The current state as a checkpoint.
     pub fn checkpoint(&self, seconds: f64) -> Result<Checkpoint, TrainError> {
         let host = |t: &Option<Tensor<1>>| -> Result<Option<Vec<f32>>, TrainError> {
-            t.as_ref().map(|t| read(t.clone())).transpose()
+            Ok(t.as_ref().map(|t| to_host(t.clone())).transpose()?)
         };
         let s = &self.adam.state;
         let c = Checkpoint {

@@ -9,13 +9,13 @@ use serde::de::DeserializeOwned;
 
 use crate::BittError;
 use crate::config::{TrainConfig, read_config};
-use crate::error::WithContext;
 use crate::fit::FitConfig;
 use crate::refine::RefineConfig;
+use bitt_stdx::WithContext;
 
 /// The text of configuration file `path`.
 fn read_text(path: &Path) -> Result<String, BittError> {
-    std::fs::read_to_string(path).context_with(|| format!("reading {}", path.display()))
+    Ok(std::fs::read_to_string(path).context_with(|| format!("reading {}", path.display()))?)
 }
 
 /// The configuration in `config` (a full [`TrainConfig`] as JSON), else the named preset.
@@ -46,10 +46,10 @@ pub fn photo_training_config(
 
 /// `what` read from `file` and checked by `validate` (its error then names the file), else
 /// the default.
-fn checked_file<T: Serialize + DeserializeOwned + Default>(
+fn checked_file<T: Serialize + DeserializeOwned + Default, E: std::fmt::Display>(
     file: Option<&Path>,
     what: &str,
-    validate: impl Fn(&T) -> Result<(), BittError>,
+    validate: impl Fn(&T) -> Result<(), E>,
 ) -> Result<T, BittError> {
     let Some(path) = file else {
         return Ok(T::default());

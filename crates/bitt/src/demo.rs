@@ -66,14 +66,15 @@ pub fn write_demo(out: &Path) -> Result<(TwoHandScene, PosedTwoHands), BittError
     let models = bitt_mesh::procedural_pair();
     let scene = demo_scene(&models);
     let posed = scene.pose_in_camera(&models)?;
-    posed.write(
+    crate::export::write_posed(
+        &posed,
         &models,
         &out.join("hands.obj"),
         Some(&out.join("hands.glb")),
     )?;
     let json = serde_json::to_string_pretty(&scene)
         .map_err(|e| BittError::Invalid(format!("encoding the demo scene: {e}")))?;
-    bitt_mesh::export::write_atomically(&out.join("scene.json"), json.as_bytes())?;
+    bitt_stdx::write_atomically(&out.join("scene.json"), json.as_bytes())?;
     Ok((scene, posed))
 }
 

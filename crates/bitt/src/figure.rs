@@ -18,9 +18,9 @@ use bitt_texture::TextureLayout;
 use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::BittError;
-use crate::error::WithContext;
 use crate::outputs::{contact_sheet_on, fill_hidden_texels};
-use crate::pipeline::read;
+use bitt_stdx::WithContext;
+use bitt_stdx::to_host;
 
 /// Side of each view of the `--views` grid.
 pub const VIEW_SIZE: usize = 256;
@@ -221,7 +221,7 @@ pub fn render_figure(
         return Ok((vec![image(None, data, width, height)], None));
     }
     let (w, h) = (camera.width(), camera.height());
-    let mut out = vec![image(None, read(full.image.clone())?, w, h)];
+    let mut out = vec![image(None, to_host(full.image.clone())?, w, h)];
     for (i, hand) in hands.iter().enumerate() {
         let alone = Scene::new(&[&meshes[i]])?;
         let r = render(
@@ -233,8 +233,8 @@ pub fn render_figure(
             &settings,
         )?;
         let name = hand.side.as_str();
-        out.push(image(Some(name.into()), read(r.image)?, w, h));
-        let mask = read(full.masks[i].clone())?.repeat(3);
+        out.push(image(Some(name.into()), to_host(r.image)?, w, h));
+        let mask = to_host(full.masks[i].clone())?.repeat(3);
         out.push(image(Some(format!("mask_{name}")), mask, w, h));
     }
     let Some(unwrapped) = &options.unwrap else {
@@ -254,9 +254,9 @@ pub fn render_figure(
             &UnwrapSettings::default(),
         )?;
         let name = hand.side.as_str();
-        let texels = layout.compact_to_image(&read(u.texels)?, [0.0; 3])?;
+        let texels = layout.compact_to_image(&to_host(u.texels)?, [0.0; 3])?;
         out.push(image(Some(format!("unwrap_{name}")), texels, s, s));
-        let mask = layout.compact_to_image(&read(u.visible)?.repeat(3), [0.0; 3])?;
+        let mask = layout.compact_to_image(&to_host(u.visible)?.repeat(3), [0.0; 3])?;
         out.push(image(Some(format!("visible_{name}")), mask, s, s));
         visible.push(u.visible_host);
     }
@@ -314,7 +314,7 @@ fn render_views(
             &view_light.to_light(&device),
             settings,
         )?;
-        panels.push(read(r.image)?);
+        panels.push(to_host(r.image)?);
     }
     Ok(panels)
 }
@@ -334,7 +334,7 @@ fn unwrap_row(
             "--views needs a {VIEW_SIZE}x{VIEW_SIZE} scene camera for its unwrap row (got {w}x{h})"
         )));
     }
-    let mut panels = vec![read(image.clone())?];
+    let mut panels = vec![to_host(image.clone())?];
     for hand in hands {
         let layout = TextureLayout::from_uv(&hand.uv, VIEW_SIZE, VIEW_SIZE, 0)?;
         let surface = TexelSurface::new(&layout, &hand.model.faces, hand.model.num_vertices())?;
@@ -346,7 +346,7 @@ fn unwrap_row(
             &full.raster,
             &UnwrapSettings::default(),
         )?;
-        let mut texels = read(u.texels)?;
+        let mut texels = to_host(u.texels)?;
         fill_hidden_texels(&mut texels, &u.visible_host, 0.25);
         panels.push(layout.compact_to_image(&texels, [0.0; 3])?);
     }

@@ -11,8 +11,8 @@ use bitt_texture::{SkinIdentity, TextureLayout, generate_texture, load_html_uvs,
 use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::BittError;
-use crate::error::WithContext;
 use crate::figure::FigureHand;
+use bitt_stdx::WithContext;
 
 /// The files and options `bitt render` makes a figure from (the hand models aside).
 #[derive(Debug, Clone, Copy)]

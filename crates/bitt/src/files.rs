@@ -1,10 +1,11 @@
 //! The run folder's file names, and readers of what a finished run keeps of its avatar
 //! (fine textures and estimated light), shared by synthetic and real runs.
 
+use bitt_stdx::FileErrorExt;
 use std::path::Path;
 
-use bitt_mesh::st;
 use bitt_render::scene::{LightValues, LightValuesExt};
+use bitt_stdx::st;
 
 use crate::BittError;
 
@@ -57,9 +58,9 @@ pub fn read_light(dir: &Path) -> Result<LightValues, BittError> {
     let path = dir.join(LIGHT);
     let text = std::fs::read_to_string(&path).map_err(|e| BittError::io(&path, e))?;
     let light: LightValues = serde_json::from_str(&text)
-        .map_err(|e| BittError::corrupt(&path, format!("not a light: {e}")))?;
+        .map_err(|e| BittError::format(&path, format!("not a light: {e}")))?;
     light
         .validate()
-        .map_err(|e| BittError::corrupt(&path, e.to_string()))?;
+        .map_err(|e| BittError::format(&path, e.to_string()))?;
     Ok(light)
 }

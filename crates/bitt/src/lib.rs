@@ -1,73 +1,38 @@
-//! The BiTT pipeline (paper Sec. 3-4): from one image of two interacting hands and their
-//! meshes to relightable UV textures of both hands.
+//! The runs (orchestration): from a scene or a photo to a trained avatar in a run folder,
+//! over the stages below it. The training core is `bitt-train`'s, geometry from a photo
+//! `bitt-fit`'s, the metrics `bitt-eval`'s and the files a user opens `bitt-outputs`'s; they
+//! are re-exported here under the paths the commands use.
 //!
-//! The training core is `bitt-train`'s, re-exported here under the same paths: [`config`],
-//! [`assets`], [`pipeline`], [`losses`], [`optim`], [`checkpoint`], [`trainer`]. The files a
-//! user opens are drawn by `bitt-outputs`, re-exported likewise: [`outputs`], [`plot`],
-//! [`viewer`], [`xr_page`], [`avatar_export`].
-//!
-//! - [`config_files`]: the configuration files the commands take (training, refinement, fit).
-//! - [`demo`]: the built-in two-hand demo scene (procedural or any other hands).
+//! - [`train_scene`]: a run's setup (fresh or resumed) and its results, for `train-scene`.
 //! - [`input`]: what a run is given: hand and prior sources, photos read and checked against
 //!   their hands, cropped and resized to the preset's size.
-//! - [`metrics`], [`evaluate`]: image and texture metrics, renders at other views and poses.
-//! - [`pair_metrics`]: two image files compared (`bitt metrics`): metrics, LPIPS inputs, report.
-//! - [`lpips`]: LPIPS-VGG with user-provided weights (unavailable without them);
-//!   [`lpips_convert`] writes its weights file from the torch checkpoints.
-//! - [`train_scene`]: a run's setup (fresh or resumed) and its results, for `train-scene`.
-//! - [`outputs`], [`run`]: the run folder (textures, renders, avatar, metrics, report);
-//!   [`files`]: its file names and the readers of a finished run's textures and light;
-//!   [`run_folder`]: where a new run may go, its first files, a resumed run's checkpoints.
-//! - [`avatar_export`]: the avatar files: rigged `avatar.glb`, `avatar_static.glb`, OBJ.
+//! - [`real`]: real runs (an image and its annotation, InterHand2.6M scenes, keypoints, a
+//!   photo alone).
+//! - [`fit`], [`refine`]: the jobs of `fit-hands` and `refine-hands` (their output folders),
+//!   over `bitt_fit`'s fit and refinement.
+//! - [`run`]: the run folder (textures, renders, avatar, metrics, report); [`files`]: its
+//!   file names and the readers of a finished run's textures and light; [`run_folder`]:
+//!   where a new run may go, its first files, a resumed run's checkpoints.
 //! - [`saved`]: a trained run read back from its folder (either kind), for re-rendering and
 //!   re-exporting without the networks.
-//! - [`viewer`]: the report's interactive 3D view of the avatar (three.js, embedded).
-//! - [`xr_page`]: `xr.html`, the per-hand XR avatars driven by three.js's `XRHandMeshModel`
-//!   (the scene's poses as tracked joint poses, or live WebXR hand tracking).
-//! - [`figure`]: `bitt render`'s figures (both hands, each alone, masks, unwrapped images,
-//!   a grid of orthographic views).
-//! - [`figure_inputs`]: what the figures are made of, read and checked (light, UV layouts,
-//!   images, procedural skin textures).
+//! - [`config_files`]: the configuration files the commands take (training, refinement, fit).
+//! - [`demo`]: the built-in two-hand demo scene (procedural or any other hands).
 //! - [`texture_model`]: a run's procedural texture prior (fitted once, cached) and `bitt
-//!   texture`'s texture PCA model (a file or the procedural fit), its parameters and the UV
-//!   texture it makes.
-//! - [`plot`]: the loss plot (`loss.png`: axes, decade ticks, legend, learning-rate steps).
-//! - [`progress`]: progress on stderr (training, evaluation, refinement, keypoint fit, PCA fit,
-//!   a run's setup): a bar redrawn on a terminal, a plain line every 10 % in a log.
-//! - [`hand_layer`]: the hand model as a differentiable burn function (both hands batched).
-//! - [`refine`]: mesh refinement of both hands against the photo through the renderer.
-//! - [`hand_priors`]: joint-angle, off-axis and penetration priors shared by `refine` and `fit`.
-//! - [`detect`]: both hands found in a photo by the built-in detector (`bitt-detect`), the
-//!   detection's files and overlay (`bitt detect-hands`, the photo-only path).
-//! - [`fit`]: both hands fitted to 2D keypoints (OpenPose, MediaPipe, plain JSON).
-//! - [`real`]: real runs (an image + annotation pickle, InterHand2.6M scenes, keypoints).
-//! - [`backend_check`], [`nets_bench`], [`gpu_check`]: a fixed computation to compare
-//!   backends, the network benches, and `bitt gpu-check` (every GPU check in one report);
-//!   [`net_shapes`]: the networks' parameter counts and shapes (`bitt nets`).
+//!   texture`'s texture PCA model (a file or the procedural fit).
+//! - [`figure`], [`figure_inputs`]: `bitt render`'s figures and what they are made of.
+//!
+//! Architecture invariant: the stages below never know about run folders, resuming or the
+//! command line; this crate never prints (progress goes to the observers the binary gives).
+//! It writes only the paths it is given and below the folders it is given, atomically.
 
-pub mod backend_check;
-pub mod baselines;
-pub mod benchmark;
 pub mod config_files;
 pub mod demo;
-pub mod detect;
 mod error;
-pub mod evaluate;
 pub mod figure;
 pub mod figure_inputs;
 pub mod files;
 pub mod fit;
-pub mod gpu_check;
-pub mod hand_layer;
-pub mod hand_priors;
 pub mod input;
-pub mod lpips;
-pub mod lpips_convert;
-pub mod metrics;
-pub mod net_shapes;
-pub mod nets_bench;
-pub mod pair_metrics;
-pub mod progress;
 pub mod real;
 pub mod refine;
 pub mod run;
@@ -76,7 +41,9 @@ pub mod saved;
 pub mod texture_model;
 pub mod train_scene;
 
-pub use bitt_outputs::{avatar_export, outputs, plot, viewer, xr_page};
+pub use bitt_eval::{baselines, evaluate, lpips, lpips_convert, metrics, pair_metrics};
+pub use bitt_fit::{detect, hand_layer, hand_priors};
+pub use bitt_outputs::{avatar_export, export, outputs, plot, viewer, xr_page};
 pub use bitt_train::{
     LossTerms, LossWeights, Observer, OptimConfig, Progress, TrainConfig, TrainError, Trainer,
     assets, checkpoint, config, losses, optim, pipeline, trainer,

@@ -2,12 +2,14 @@
 //! evaluate against ground truth, and write the run folder.
 
 use bitt_render::scene::LightValuesExt;
+use bitt_stdx::FileErrorExt;
 
 use std::path::{Path, PathBuf};
 
 use bitt_mesh::glam::{DMat3, DVec3};
-use bitt_mesh::{PinholeCamera, TwoHandScene, procedural_pair, st};
+use bitt_mesh::{PinholeCamera, TwoHandScene, procedural_pair};
 use bitt_render::scene::LightValues;
+use bitt_stdx::st;
 use bitt_synth::SynthScene;
 use bitt_texture::TexturePca;
 use burn::tensor::Device;
@@ -26,8 +28,8 @@ use crate::outputs::{
     base64, contact_sheet, mask_rgb, rgb_image, texture_image, write_avatar_glb, write_json,
     write_loss_plot, write_png,
 };
-use crate::pipeline::read;
 use crate::trainer::Trainer;
+use bitt_stdx::to_host;
 
 /// Writes one named PNG `[3, h, w]` and lists it in the report.
 type PngSink<'a> = dyn FnMut(&str, PathBuf, &[f32], usize, usize) -> Result<(), BittError> + 'a;
@@ -64,7 +66,7 @@ pub fn write_training_refinement(
     truth: Option<&TwoHandScene>,
 ) -> Result<(), BittError> {
     let [_, _, _, w] = trainer.view.image.dims();
-    let image = read(trainer.view.image.clone().inner())?;
+    let image = to_host(trainer.view.image.clone().inner())?;
     let camera = trainer.view.geometry.scene_camera;
     let at_view = |s: &TwoHandScene| TwoHandScene {
         camera,
@@ -77,7 +79,7 @@ pub fn write_training_refinement(
         &trainer.assets.scene,
         &at_view(&refinement.initial),
         &at_view(&refinement.hands),
-        crate::refine::overlay_scale(w),
+        crate::outputs::overlay_scale(w),
     )?;
     let mut record = serde_json::json!({
         "kind": "train-scene",
@@ -185,7 +187,7 @@ pub fn write_run(
     let outputs = trainer.forward()?;
     let avatar = Avatar::from_outputs(trainer, &outputs)?;
     let [_, _, h, w] = trainer.view.image.dims();
-    let host4 = |t: &burn::tensor::Tensor<4>| read(t.clone().inner());
+    let host4 = |t: &burn::tensor::Tensor<4>| to_host(t.clone().inner());
     let renders = dir.join("renders");
     let textures = dir.join("textures");
     for d in [&renders, &textures] {
@@ -374,7 +376,7 @@ pub fn write_run(
                 });
             }
             crate::avatar_export::XrAvatar {
-                convention: bitt_mesh::export::XrConvention::WebXr,
+                convention: bitt_outputs::export::XrConvention::WebXr,
                 models: &trainer.assets.models,
                 hands,
                 textures: [&images[0], &images[1]],
@@ -486,7 +488,7 @@ fn score_synthetic(
     let size = trainer.config.nets.image_size;
     let score = |view: &bitt_synth::SynthView| -> Result<Scored, BittError> {
         // Bring ground truth to the preset's size like the input.
-        let (image, masks, hands) = crate::evaluate::fit_synthetic_view(view, size)?;
+        let (image, masks, hands) = crate::input::fit_synthetic_view(view, size)?;
         let (s, fine, coarse) = score_view(trainer, avatar, &hands, &image, &masks)?;
         let gt = crate::evaluate::hand_image(&image, &masks, size * size)?;
         Ok((s, fine, coarse, gt))
@@ -734,7 +736,7 @@ fn write_report(
         ));
     }
     html.push_str("</body></html>\n");
-    bitt_mesh::export::write_atomically(path, html.as_bytes())?;
+    bitt_stdx::write_atomically(path, html.as_bytes())?;
     Ok(())
 }
 
@@ -781,7 +783,11 @@ pub fn training_camera(
     scene: &SynthScene,
     config: &TrainConfig,
 ) -> Result<PinholeCamera, BittError> {
-    crate::input::fit_camera(&scene.given.camera, None, config.nets.image_size)
+    Ok(crate::input::fit_camera(
+        &scene.given.camera,
+        None,
+        config.nets.image_size,
+    )?)
 }
 
 /// A trained avatar read back from a run folder: no networks needed to render it.
@@ -855,7 +861,7 @@ impl SavedAvatar {
             &light.to_light(device),
             &bitt_render::scene::RenderSettings::default(),
         )?;
-        Ok(read(r.image)?)
+        Ok(to_host(r.image)?)
     }
 
     /// The hands of the training view (or of novel pose `pose`), seen from the training

@@ -3,6 +3,7 @@
 //! run's first files ([`write_fresh_run`]: configuration, input, keypoint fit and detection,
 //! refinement), and a resumed run's checkpoints ([`load_checkpoints`]).
 
+use bitt_stdx::FileErrorExt;
 use std::path::{Path, PathBuf};
 
 use bitt_mesh::TwoHandScene;
@@ -266,7 +267,7 @@ pub fn write_fresh_run(
     std::fs::create_dir_all(out).map_err(|e| BittError::io(out, e))?;
     let config = serde_json::to_string_pretty(&trainer.config)
         .map_err(|e| BittError::Invalid(format!("encoding the configuration: {e}")))?;
-    bitt_mesh::export::write_atomically(&out.join(files::CONFIG), config.as_bytes())?;
+    bitt_stdx::write_atomically(&out.join(files::CONFIG), config.as_bytes())?;
     match input {
         RunInput::Synthetic(scene) => scene.write(&out.join(files::SCENE))?,
         RunInput::Real(record, scene) => record.write(out, scene)?,

@@ -5,9 +5,10 @@
 
 use std::path::Path;
 
-use bitt_mesh::export::{XrConvention, write_atomically};
 use bitt_mesh::{HandPair, PinholeCamera, Side, TwoHandScene, procedural_pair};
+use bitt_outputs::export::XrConvention;
 use bitt_render::scene::{LightValues, Material};
+use bitt_stdx::write_atomically;
 use burn::tensor::Device;
 
 use crate::BittError;
@@ -341,7 +342,7 @@ impl SavedRun {
         match kind {
             ExportKind::Rigged | ExportKind::Static => {
                 // A file the user named that is not a glTF binary is not replaced.
-                bitt_mesh::export::check_replaceable(out, b"glTF", "glTF binary (.glb)")?;
+                bitt_stdx::check_replaceable(out, b"glTF", "glTF binary (.glb)")?;
                 let bytes = if kind == ExportKind::Rigged {
                     files.rigged_glb()?
                 } else {

@@ -344,7 +344,7 @@ fn a_non_finite_loss_is_recovered_from() {
     let saved = crate::run::SavedAvatar::load(&dir).unwrap();
     let hands = saved.view(None, 0.0, 0.0).unwrap();
     let image = saved.render(&hands, None, &Device::flex()).unwrap();
-    let fine = crate::pipeline::read(t.forward().unwrap().fine_image.inner()).unwrap();
+    let fine = bitt_stdx::to_host(t.forward().unwrap().fine_image.inner()).unwrap();
     let diff = image
         .iter()
         .zip(&fine)
@@ -477,8 +477,8 @@ fn gltf_validator_report(file: &std::path::Path) -> Option<serde_json::Value> {
 /// would), they give the forward pass within 1 mm on average without its pose correctives.
 #[test]
 fn a_trained_runs_xr_hands_are_valid_and_follow_tracked_poses() {
-    use bitt_mesh::export::{WEBXR_JOINTS, gltf_vertex_sources, skinned_vertices_posed};
     use bitt_mesh::glam::{DMat4, DQuat};
+    use bitt_outputs::export::{WEBXR_JOINTS, gltf_vertex_sources, skinned_vertices_posed};
     let (t, scene, dir) = written_one_iteration_run("xr");
     let xr = dir.join("xr");
     let playback: serde_json::Value =
@@ -576,8 +576,8 @@ fn a_trained_runs_xr_hands_are_valid_and_follow_tracked_poses() {
 /// meshes.
 #[test]
 fn a_trained_runs_avatar_is_rigged_and_valid_gltf() {
-    use bitt_mesh::export::{gltf_vertex_sources, skinned_vertices};
     use bitt_mesh::glam::{DMat3, DVec3};
+    use bitt_outputs::export::{gltf_vertex_sources, skinned_vertices};
     let (t, scene, dir) = written_one_iteration_run("avatar");
     let glb = std::fs::read(dir.join("avatar.glb")).unwrap();
     assert!(dir.join("avatar_static.glb").is_file());
@@ -672,7 +672,7 @@ fn an_untrusted_photo_pixel_neither_trains_nor_unwraps() {
     let device = Device::flex().autodiff();
     let t = synthetic_trainer(&scene, &config, &pca, &device).unwrap();
     let s = config.nets.image_size;
-    let drawn = crate::pipeline::read(t.view.mask.clone().inner()).unwrap();
+    let drawn = bitt_stdx::to_host(t.view.mask.clone().inner()).unwrap();
     let visible_before: Vec<usize> = t
         .view
         .plans
@@ -700,12 +700,12 @@ fn an_untrusted_photo_pixel_neither_trains_nor_unwraps() {
         .map(|p| p.visible().iter().filter(|&&v| v).count())
         .collect();
     assert_eq!(after[0] + r.dropped[0], visible_before[0]);
-    let weight = crate::pipeline::read(half.weight.clone().expect("applied").inner()).unwrap();
+    let weight = bitt_stdx::to_host(half.weight.clone().expect("applied").inner()).unwrap();
     for p in 0..s * s {
         let expect = if drawn[p] > 0.5 && !keep[p] { 0.0 } else { 1.0 };
         assert_eq!(weight[p], expect, "pixel {p}");
     }
-    let v = crate::pipeline::read(half.visible[0].clone().inner()).unwrap();
+    let v = bitt_stdx::to_host(half.visible[0].clone().inner()).unwrap();
     assert_eq!(v.iter().filter(|&&x| x > 0.5).count(), after[0]);
     // The loss does not see the untrusted pixels.
     let mut t = t;
@@ -713,7 +713,7 @@ fn an_untrusted_photo_pixel_neither_trains_nor_unwraps() {
     let outputs = t.forward().unwrap();
     let rec_fine = |v: &crate::pipeline::TrainingView| {
         let l = crate::losses::loss(&outputs, v, &t.config.loss);
-        crate::pipeline::read(l.terms[0].clone()).unwrap()[0]
+        bitt_stdx::to_host(l.terms[0].clone()).unwrap()[0]
     };
     let before = rec_fine(&t.view);
     let mut changed = half;

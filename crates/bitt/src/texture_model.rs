@@ -4,6 +4,7 @@
 //! The model is HTML's `model.pkl`, a safetensors file, or the project's procedural skin model
 //! fitted on the fly; the parameter vector a JSON file or seeded normal draws.
 
+use bitt_stdx::FileErrorExt;
 use std::path::Path;
 use std::time::Instant;
 
@@ -17,7 +18,7 @@ use burn::tensor::Device;
 
 use crate::BittError;
 use crate::config::TrainConfig;
-use crate::error::WithContext;
+use bitt_stdx::WithContext;
 
 /// The texture PCA of `config.texture`, read from `cache_dir` when fitted before, else fitted
 /// (seconds at `quick`, minutes at `paper`) and cached there.

@@ -17,7 +17,6 @@ use crate::BittError;
 use crate::assets::HandAssets;
 use crate::config::TrainConfig;
 use crate::config_files::fit_config;
-use crate::error::WithContext;
 use crate::files;
 use crate::fit::FitOutput;
 use crate::fit::{
@@ -37,6 +36,7 @@ use crate::run_folder::{
 };
 use crate::texture_model::texture_prior_with_progress;
 use crate::trainer::Trainer;
+use bitt_stdx::WithContext;
 
 /// What the setup of a run tells on the way: lines for the user, and progress displays for
 /// its long steps (each call gives a new one).
@@ -551,7 +551,7 @@ pub fn resumed_run(
         observer.say(&format!("warning: {w}"));
     }
     // Temporaries of writes a killed process never finished (it is a run folder of ours).
-    for path in bitt_mesh::export::remove_stale_temporaries(dir)? {
+    for path in bitt_stdx::remove_stale_temporaries(dir)? {
         observer.say(&format!(
             "removed {}, left by an interrupted write",
             path.display()

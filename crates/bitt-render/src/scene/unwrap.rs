@@ -123,7 +123,7 @@ impl TexelSurface {
     /// Wrong vertex count or non-finite vertices.
     pub fn normals(&self, vertices: &[DVec3]) -> Result<Vec<DVec3>, RenderError> {
         self.check(vertices)?;
-        let vn = bitt_mesh::export::vertex_normals(vertices, &self.mesh_faces);
+        let vn = bitt_mesh::model::vertex_normals(vertices, &self.mesh_faces);
         Ok(self.at_texels(&vn).map(DVec3::normalize_or_zero).collect())
     }
 }

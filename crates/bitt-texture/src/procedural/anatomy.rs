@@ -127,7 +127,7 @@ fn aligned_faces(layout: &TextureLayout, hand: &HandModel) -> Result<Vec<[u32; 3
 
 /// Area-weighted vertex normals (`+Y` where undefined).
 fn vertex_normals(vertices: &[DVec3], faces: &[[u32; 3]]) -> Vec<DVec3> {
-    bitt_mesh::export::vertex_normals(vertices, faces)
+    bitt_mesh::model::vertex_normals(vertices, faces)
         .into_iter()
         .map(|n| if n == DVec3::ZERO { DVec3::Y } else { n })
         .collect()

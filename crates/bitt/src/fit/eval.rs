@@ -12,8 +12,8 @@ use bitt_texture::procedural::noise::SplitMix64;
 use super::{FitOutput, KeypointFit, keypoint_overlay};
 use crate::BittError;
 use crate::assets::HandAssets;
-use crate::error::WithContext;
 use crate::hand_priors::{FLEXION_RANGE, flexion_angles, flexion_axes};
+use bitt_stdx::WithContext;
 
 /// A keypoint fit of `scene`'s training view (seen by `camera`, with the keypoints `points`
 /// read from `keypoints`) as a run folder records it (`train-scene --scene DIR --keypoints

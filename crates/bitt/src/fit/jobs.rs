@@ -15,8 +15,9 @@ use crate::assets::HandAssets;
 use crate::config::TrainConfig;
 use crate::detect::{DetectionFiles, PhotoDetection};
 use crate::input::{HandSource, PriorSource, check_sources, load_models};
+use crate::outputs::overlay_scale;
 use crate::refine::{
-    HANDS_JSON, PhotoRefinement, RefineConfig, RefineObserver, outlines, overlay_scale, read_mask,
+    HANDS_JSON, PhotoRefinement, RefineConfig, RefineObserver, outlines, read_mask,
     refine_photo_hands,
 };
 
@@ -487,4 +488,35 @@ pub fn write_fit_outputs(out: &Path, fit: &PhotoFit) -> Result<(), BittError> {
         &FIT_NAMES,
         &files,
     )?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn intrinsics_parse_and_bad_ones_are_named() {
+        assert_eq!(
+            parse_intrinsics("600, 610,320,240").unwrap(),
+            [600.0, 610.0, 320.0, 240.0]
+        );
+        for bad in ["600,600,320", "a,1,2,3", "0,600,1,1", "nan,1,1,1"] {
+            let e = parse_intrinsics(bad).unwrap_err().to_string();
+            assert!(e.contains("--intrinsics"), "{e}");
+        }
+        // Against the photo (issue 38, class 2): absurd focals and principal points.
+        check_intrinsics_for_image([600.0, 600.0, 320.0, 240.0], [640, 480]).unwrap();
+        check_intrinsics_for_image([600.0, 600.0, -100.0, 900.0], [640, 480]).unwrap();
+        for (bad, what) in [
+            ([1e-30, 600.0, 320.0, 240.0], "fx = "),
+            ([600.0, 1e9, 320.0, 240.0], "fy = "),
+            ([600.0, 600.0, 1e9, 240.0], "principal point"),
+            ([600.0, 600.0, 320.0, -1e6], "principal point"),
+        ] {
+            let e = check_intrinsics_for_image(bad, [640, 480])
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("--intrinsics") && e.contains(what), "{e}");
+        }
+    }
 }

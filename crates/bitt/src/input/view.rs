@@ -189,20 +189,6 @@ pub fn prepare_view(
     })
 }
 
-/// A [`BittError::File`] I/O error naming `image` when it is not a file (before anything is read).
-///
-/// # Errors
-/// The missing input image.
-pub fn require_image(image: &Path) -> Result<(), BittError> {
-    if image.is_file() {
-        return Ok(());
-    }
-    Err(BittError::io(
-        image,
-        std::io::Error::new(std::io::ErrorKind::NotFound, "input image not found"),
-    ))
-}
-
 /// Reads an image, checking its size against the camera's.
 pub fn read_image(path: &Path, camera: &PinholeCamera, what: &str) -> Result<Vec<f32>, BittError> {
     let img = load_image(path)?;
@@ -228,7 +214,7 @@ pub fn annotation_view(
     models: &HandPair,
     size: usize,
 ) -> Result<RealView, BittError> {
-    require_image(image)?;
+    crate::input::require_image(image)?;
     let hands = bitt_mesh::load_bitt_annotation(annotation, (BITT_CROP_SIZE, BITT_CROP_SIZE))?;
     for side in Side::BOTH {
         if hands.hand(side).is_none() {
@@ -277,6 +263,43 @@ pub fn interhand_views(
             .map(|(k, v)| prep(format!("pose_{k:02}"), v))
             .collect::<Result<_, _>>()?,
     })
+}
+
+/// Image `[3, S, S]`, hand masks `[S, S]` and the hands with the fitted camera.
+pub type FittedView = (Vec<f32>, [Vec<f32>; 2], TwoHandScene);
+
+/// A synthetic view's ground truth brought to the preset's `size` as the input is (crop
+/// around the hands and resize, intrinsics adjusted): (image `[3, S, S]`, hand masks
+/// `[S, S]` each, the hands with the fitted camera).
+pub fn fit_synthetic_view(
+    view: &bitt_synth::SynthView,
+    size: usize,
+) -> Result<FittedView, BittError> {
+    let input = ImageInput {
+        image: view.image.clone(),
+        mask: None,
+        camera: view.hands.camera,
+    };
+    let (image, masks, camera) = if input.size() == [size, size] {
+        (view.image.clone(), view.masks.clone(), view.hands.camera)
+    } else {
+        let f = input.fit_square(None, size)?;
+        let m = |m: &Vec<f32>| {
+            ImageInput {
+                image: [m.as_slice(), m, m].concat(),
+                mask: None,
+                camera: view.hands.camera,
+            }
+            .fit_square(None, size)
+            .map(|x| x.image[..size * size].to_vec())
+        };
+        (f.image, [m(&view.masks[0])?, m(&view.masks[1])?], f.camera)
+    };
+    let hands = TwoHandScene {
+        camera,
+        ..view.hands.clone()
+    };
+    Ok((image, masks, hands))
 }
 
 #[cfg(test)]

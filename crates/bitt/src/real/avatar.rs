@@ -1,6 +1,7 @@
 //! A saved real avatar read back from its folder, and textures rendered on any hands.
 
 use bitt_render::scene::LightValuesExt;
+use bitt_stdx::FileErrorExt;
 
 use std::path::Path;
 
@@ -12,7 +13,7 @@ use super::{RealInput, load_models};
 use crate::BittError;
 use crate::assets::{HandAssets, ViewGeometry};
 use crate::config::TrainConfig;
-use crate::pipeline::read;
+use bitt_stdx::to_host;
 
 /// A real run's avatar read back from its folder (no networks needed).
 #[derive(Debug, Clone)]
@@ -96,5 +97,5 @@ pub fn render_textures(
         &light.to_light(device),
         &RenderSettings::default(),
     )?;
-    Ok(read(r.image)?)
+    Ok(to_host(r.image)?)
 }

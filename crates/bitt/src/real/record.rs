@@ -1,8 +1,10 @@
 //! The record a real run keeps to be resumed: `input.json` and `input/images.safetensors`.
 
+use bitt_stdx::FileErrorExt;
 use std::path::{Path, PathBuf};
 
-use bitt_mesh::{PinholeCamera, TwoHandScene, st};
+use bitt_mesh::{PinholeCamera, TwoHandScene};
+use bitt_stdx::st;
 use burn::tensor::Device;
 
 use super::{HandSource, PriorSource, RealScene, RealView, load_models, real_trainer};
@@ -165,9 +167,9 @@ impl RealInput {
         let path = dir.join(files::INPUT);
         let text = std::fs::read_to_string(&path).map_err(|e| BittError::io(&path, e))?;
         let input: RealInput = serde_json::from_str(&text)
-            .map_err(|e| BittError::corrupt(&path, format!("not a real-run input record: {e}")))?;
+            .map_err(|e| BittError::format(&path, format!("not a real-run input record: {e}")))?;
         if input.format != INPUT_FORMAT {
-            return Err(BittError::corrupt(
+            return Err(BittError::format(
                 &path,
                 format!("format `{}`, expected `{INPUT_FORMAT}`", input.format),
             ));

@@ -9,8 +9,8 @@ use burn::tensor::Tensor;
 use super::{RealScene, RealView};
 use crate::BittError;
 use crate::assets::ViewGeometry;
-use crate::pipeline::read;
 use crate::trainer::Trainer;
+use bitt_stdx::to_host;
 
 /// Scores of a real multi-view scene against its photographs (hands masked by the given
 /// meshes' silhouettes, as the reference's `masked_img`).
@@ -51,7 +51,7 @@ pub fn silhouettes(
         &LightValues::default().to_light(device),
         &settings,
     )?;
-    let mut masks = r.masks.into_iter().map(read);
+    let mut masks = r.masks.into_iter().map(to_host);
     let (Some(l), Some(r)) = (masks.next(), masks.next()) else {
         return Err(BittError::Invalid("the render has no mask per hand".into()));
     };

@@ -14,9 +14,9 @@ use super::{
 use crate::BittError;
 use crate::assets::{HandAssets, ViewGeometry};
 use crate::config::TrainConfig;
-use crate::error::WithContext;
 use crate::refine::{MeshRefine, Refinement, refine_view, threshold_mask};
 use crate::trainer::Trainer;
+use bitt_stdx::WithContext;
 
 /// What every fresh real run's setup shares ([`annotation_setup`], [`keypoint_setup`],
 /// [`interhand_setup`]): where the hand models and the texture prior come from, the training

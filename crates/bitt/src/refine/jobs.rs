@@ -10,8 +10,8 @@ use burn::tensor::Device;
 
 use super::{
     MASK_THRESHOLD, RefineConfig, RefineObserver, Refinement, SPECK_FRACTION,
-    drop_small_components, holes, overlay, overlay_scale, refine_synthetic, refine_view,
-    silhouette, threshold_mask, vertex_error_px,
+    drop_small_components, holes, overlay, refine_synthetic, refine_view, silhouette,
+    threshold_mask, vertex_error_px,
 };
 use crate::BittError;
 use crate::assets::HandAssets;
@@ -22,6 +22,7 @@ use crate::input::{
     read_image, reference_crop_box, texture_model,
 };
 use crate::metrics::mask_iou;
+use crate::outputs::overlay_scale;
 use bitt_mesh::annotation::BITT_CROP_SIZE;
 
 /// The refined hands file of `bitt refine-hands`.
