@@ -667,16 +667,14 @@ where
 mod tests {
     use super::*;
 
+    /// Terms that are fixed fractions of `total` (one of them 0, as `alb` is when disabled),
+    /// for any number of terms.
     fn terms(total: f64) -> LossTerms {
-        LossTerms {
-            rec_fine: 0.4 * total,
-            rec_coarse: 0.5 * total,
-            rec_albedo: 0.6 * total,
-            nv: 0.1 * total,
-            alb: 0.0,
-            sym: 0.02 * total,
-            total,
-        }
+        let fractions = [0.4, 0.5, 0.6, 0.1, 0.0, 0.02];
+        let values: Vec<f64> = (0..LossTerms::COUNT)
+            .map(|k| fractions[k % fractions.len()] * total)
+            .collect();
+        LossTerms::from_values(&values, total)
     }
 
     /// A history shaped like a real run: a fast drop, then slower, with small steps down

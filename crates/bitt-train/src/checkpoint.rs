@@ -275,19 +275,16 @@ mod tests {
     use super::*;
 
     fn example() -> Checkpoint {
-        let terms = LossTerms::from_values(&[0.1, 0.2, 0.3, 0.4, 0.5, 0.6], 1.0);
-        // A value whose shortest decimal text does not always parse back to the same bits.
-        let odd = LossTerms::from_values(
-            &[
-                0.1 + 0.2,
-                1.0 / 3.0,
-                2.2250738585072014e-308,
-                7e-9,
-                0.0,
-                5.0,
-            ],
-            9.000000000000002,
-        );
+        // Sized by `LossTerms::COUNT`, so a new loss term needs no edit here.
+        let plain: Vec<f64> = (1..=LossTerms::COUNT).map(|k| k as f64 / 10.0).collect();
+        let terms = LossTerms::from_values(&plain, 1.0);
+        // Values whose shortest decimal text does not always parse back to the same bits.
+        let odd: Vec<f64> = [0.1 + 0.2, 1.0 / 3.0, 2.2250738585072014e-308, 7e-9, 0.0, 5.0]
+            .into_iter()
+            .cycle()
+            .take(LossTerms::COUNT)
+            .collect();
+        let odd = LossTerms::from_values(&odd, 9.000000000000002);
         Checkpoint {
             iteration: 2,
             lr_scale: 0.5,
@@ -430,7 +427,7 @@ mod tests {
     fn first_format_files_still_load() {
         let path = scratch("v1");
         let c = Checkpoint {
-            history: vec![LossTerms::from_values(&[0.5; 6], 3.0); 2],
+            history: vec![LossTerms::from_values(&[0.5; LossTerms::COUNT], 3.0); 2],
             ..example()
         };
         let bytes = |v: &[f32]| f32_bytes(v);
