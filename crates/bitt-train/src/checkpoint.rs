@@ -279,11 +279,18 @@ mod tests {
         let plain: Vec<f64> = (1..=LossTerms::COUNT).map(|k| k as f64 / 10.0).collect();
         let terms = LossTerms::from_values(&plain, 1.0);
         // Values whose shortest decimal text does not always parse back to the same bits.
-        let odd: Vec<f64> = [0.1 + 0.2, 1.0 / 3.0, 2.2250738585072014e-308, 7e-9, 0.0, 5.0]
-            .into_iter()
-            .cycle()
-            .take(LossTerms::COUNT)
-            .collect();
+        let odd: Vec<f64> = [
+            0.1 + 0.2,
+            1.0 / 3.0,
+            2.2250738585072014e-308,
+            7e-9,
+            0.0,
+            5.0,
+        ]
+        .into_iter()
+        .cycle()
+        .take(LossTerms::COUNT)
+        .collect();
         let odd = LossTerms::from_values(&odd, 9.000000000000002);
         Checkpoint {
             iteration: 2,
