@@ -39,7 +39,7 @@ pub struct Avatar {
 pub const MAX_SKIN_SATURATION: f32 = 0.85;
 
 /// HSV saturation of an RGB value, `(max - min) / max` (0 for black).
-pub fn hsv_saturation(rgb: [f32; 3]) -> f32 {
+pub(crate) fn hsv_saturation(rgb: [f32; 3]) -> f32 {
     let max = rgb[0].max(rgb[1]).max(rgb[2]);
     let min = rgb[0].min(rgb[1]).min(rgb[2]);
     if max <= 0.0 {
@@ -58,9 +58,9 @@ pub fn max_hsv_saturation(texture: &[f32]) -> f32 {
 }
 
 /// Texels whose ambient occlusion is below this are "in shade" for [`albedo_in_shade`].
-pub const SHADE_OCCLUSION: f32 = 0.6;
+pub(crate) const SHADE_OCCLUSION: f32 = 0.6;
 /// Texels whose ambient occlusion is above this are "open" for [`albedo_in_shade`].
-pub const OPEN_OCCLUSION: f32 = 0.9;
+pub(crate) const OPEN_OCCLUSION: f32 = 0.9;
 
 /// How much darker an albedo is in shade than in the open: over the texels `visible` per
 /// hand, the mean luminance (Rec. 709) of `textures` (`[3, T]` per hand) on the texels
@@ -98,7 +98,7 @@ pub fn albedo_in_shade(
 /// bits, is above [`MAX_SKIN_SATURATION`] with the same texel of `coarse` (the texture
 /// prior's); returns how many were replaced. The avatar's fine textures pass through it, so
 /// no file, render or score carries a texel no skin has.
-pub fn replace_implausible_texels(fine: &mut [f32], coarse: &[f32]) -> usize {
+pub(crate) fn replace_implausible_texels(fine: &mut [f32], coarse: &[f32]) -> usize {
     let t = fine.len() / 3;
     let mut replaced = 0;
     for i in 0..t {

@@ -43,7 +43,7 @@ use crate::EvalError;
 use bitt_stdx::WithContext;
 
 /// The VGG16 `features` indices of the 13 convolutions with their `(in, out)` channels.
-pub const VGG16_CONVS: [(usize, usize, usize); 13] = [
+pub(crate) const VGG16_CONVS: [(usize, usize, usize); 13] = [
     (0, 3, 64),
     (2, 64, 64),
     (5, 64, 128),
@@ -64,14 +64,14 @@ pub const VGG16_CONVS: [(usize, usize, usize); 13] = [
 const BLOCKS: [usize; 5] = [2, 2, 3, 3, 3];
 
 /// Channels of the five taps (and of `lin0` .. `lin4`).
-pub const LIN_CHANNELS: [usize; 5] = [64, 128, 256, 512, 512];
+pub(crate) const LIN_CHANNELS: [usize; 5] = [64, 128, 256, 512, 512];
 
 /// The scaling layer's shift and scale (`lpips.pretrained_networks.ScalingLayer`).
 const SHIFT: [f32; 3] = [-0.030, -0.088, -0.188];
 const SCALE: [f32; 3] = [0.458, 0.448, 0.450];
 
 /// Smallest input side: after four 2x2 poolings `conv5_3` still has a pixel.
-pub const MIN_SIDE: usize = 16;
+pub(crate) const MIN_SIDE: usize = 16;
 
 /// Where `bitt convert-lpips` writes the weights by default and where [`LpipsVgg::find`]
 /// looks: `$BITT_LPIPS_WEIGHTS`, else `~/.cache/bitt/lpips_vgg.safetensors`.
@@ -88,7 +88,7 @@ pub fn default_weights_path() -> Option<PathBuf> {
 }
 
 /// Every tensor name of the weights file with its shape, in a fixed order.
-pub fn weight_names() -> Vec<(String, Vec<usize>)> {
+pub(crate) fn weight_names() -> Vec<(String, Vec<usize>)> {
     let mut out = Vec::with_capacity(31);
     for (idx, cin, cout) in VGG16_CONVS {
         out.push((format!("features.{idx}.weight"), vec![cout, cin, 3, 3]));
@@ -101,17 +101,17 @@ pub fn weight_names() -> Vec<(String, Vec<usize>)> {
 }
 
 /// The tensor names of the weights file (see the module docs), for documentation and tools.
-pub const WEIGHT_NAMES: &str = "features.{0,2,5,7,10,12,14,17,19,21,24,26,28}.weight \
+pub(crate) const WEIGHT_NAMES: &str = "features.{0,2,5,7,10,12,14,17,19,21,24,26,28}.weight \
                                 [out, in, 3, 3], features.{..}.bias [out], \
                                 lin{0..4}.weight [1, C, 1, 1]; all F32";
 
 /// The `format` metadata of the weights file.
-pub const WEIGHTS_FORMAT: &str = "bitt-lpips-vgg-v0.1";
+pub(crate) const WEIGHTS_FORMAT: &str = "bitt-lpips-vgg-v0.1";
 
 /// Writes the weights file: `tensors` must hold exactly the tensors of [`weight_names`] with
 /// their shapes (`(name, shape, values)`). Atomic (a temporary file renamed into place);
 /// creates the parent folder.
-pub fn save_weights(
+pub(crate) fn save_weights(
     path: &Path,
     tensors: &[(String, Vec<usize>, Vec<f32>)],
 ) -> Result<(), EvalError> {
@@ -221,7 +221,7 @@ impl LpipsVgg {
     }
 
     /// [`LpipsVgg::load`] from bytes already read; `path` names them in errors.
-    pub fn from_safetensors_bytes(
+    pub(crate) fn from_safetensors_bytes(
         bytes: &[u8],
         path: &Path,
         device: &Device,

@@ -11,7 +11,7 @@ use crate::EvalError;
 use crate::lpips::{self, LpipsVgg};
 
 /// The float tensors of a torch state dict: (name, shape, values as `f32`).
-pub type StateDict = Vec<(String, Vec<usize>, Vec<f32>)>;
+pub(crate) type StateDict = Vec<(String, Vec<usize>, Vec<f32>)>;
 
 /// The float tensors of a torch checkpoint's state dict (values as `f32`), the reader
 /// [`convert`] takes.
@@ -44,7 +44,7 @@ pub fn torch_state_dict(path: &Path) -> Result<StateDict, EvalError> {
 
 /// Where torch caches torchvision's VGG16 weights,
 /// `~/.cache/torch/hub/checkpoints/vgg16-397923af.pth` (relative without `HOME`).
-pub fn torch_cache_vgg16() -> PathBuf {
+pub(crate) fn torch_cache_vgg16() -> PathBuf {
     std::env::var_os("HOME")
         .map(PathBuf::from)
         .unwrap_or_default()
@@ -53,7 +53,7 @@ pub fn torch_cache_vgg16() -> PathBuf {
 
 /// Our tensor name for a name of the `lpips` package's state dict or of torchvision's VGG16;
 /// `None` for tensors LPIPS does not use.
-pub fn our_name(name: &str) -> Option<String> {
+pub(crate) fn our_name(name: &str) -> Option<String> {
     // lpips: lin{l}.model.1.weight, lins.{l}.model.1.weight, net.slice{s}.{idx}.{weight,bias}
     if let Some(rest) = name.strip_prefix("lins.") {
         let l = rest.strip_suffix(".model.1.weight")?;

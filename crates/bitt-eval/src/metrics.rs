@@ -37,7 +37,7 @@ const SIGMA: f64 = 1.5;
 const MS_WEIGHTS: [f64; 5] = [0.0448, 0.2856, 0.3001, 0.2363, 0.1333];
 /// The smallest image side MS-SSIM accepts: `pytorch_msssim` asserts `min(h, w) > 160`
 /// (`(WIN - 1) * 2^4`), so that the coarsest scale still holds a whole window.
-pub const MS_SSIM_MIN_SIDE: usize = (WIN - 1) * 16 + 1;
+pub(crate) const MS_SSIM_MIN_SIDE: usize = (WIN - 1) * 16 + 1;
 /// `pytorch_msssim`'s window (`_fspecial_gauss_1d(11, 1.5)`, float32), as bits.
 const PYTORCH_WINDOW_BITS: [u32; WIN] = [
     0x3a86_cab8,
@@ -103,7 +103,7 @@ pub fn image_metrics(a: &[f32], b: &[f32], dims: [usize; 3]) -> ImageMetrics {
 ///
 /// # Panics
 /// When the lengths differ from `c * h * w`.
-pub fn image_metrics_with(
+pub(crate) fn image_metrics_with(
     a: &[f32],
     b: &[f32],
     [c, h, w]: [usize; 3],
@@ -167,7 +167,7 @@ pub fn masked_image_metrics(
 ///
 /// # Panics
 /// When the lengths differ from `c * h * w` (image) or `h * w` (mask).
-pub fn apply_mask(image: &[f32], mask: &[f32], [c, h, w]: [usize; 3]) -> Vec<f32> {
+pub(crate) fn apply_mask(image: &[f32], mask: &[f32], [c, h, w]: [usize; 3]) -> Vec<f32> {
     assert_eq!(image.len(), c * h * w);
     assert_eq!(mask.len(), h * w);
     image
@@ -334,7 +334,7 @@ fn pool(p: &[f64], h: usize, w: usize) -> (Vec<f64>, usize, usize) {
 
 /// Mean absolute difference of two compact textures `[3, T]` over the texels where `select`
 /// is true (`None` when none is).
-pub fn texel_l1(a: &[f32], b: &[f32], select: &[bool]) -> Option<f64> {
+pub(crate) fn texel_l1(a: &[f32], b: &[f32], select: &[bool]) -> Option<f64> {
     let t = select.len();
     let (mut sum, mut n) = (0.0, 0usize);
     for ch in 0..3 {
@@ -385,7 +385,7 @@ pub struct TextureErrors {
 /// The least-squares gain per channel of `texture` to `gt` over the selected texels (both
 /// `[3, T]`): `g_c = sum x y / sum x^2`. `None` when no texel is selected or the texture is
 /// zero on all of them in some channel.
-pub fn channel_gains(texture: &[f32], gt: &[f32], select: &[bool]) -> Option<[f64; 3]> {
+pub(crate) fn channel_gains(texture: &[f32], gt: &[f32], select: &[bool]) -> Option<[f64; 3]> {
     let t = select.len();
     if texture.len() != 3 * t || gt.len() != 3 * t {
         return None;

@@ -27,16 +27,16 @@ pub const DETECTION_JSON: &str = "detection.json";
 pub const KEYPOINTS_JSON: &str = "keypoints.json";
 
 /// The overlay in a `detect-hands` folder.
-pub const OVERLAY: &str = "overlay.png";
+pub(crate) const OVERLAY: &str = "overlay.png";
 
 /// The overlay in a `fit-hands` folder or a run folder (next to their own `overlay.png`).
 pub const DETECTION_OVERLAY: &str = "detection_overlay.png";
 
 /// The left hand's colour in the overlay (orange).
-pub const LEFT_COLOR: [u8; 3] = [255, 140, 0];
+pub(crate) const LEFT_COLOR: [u8; 3] = [255, 140, 0];
 
 /// The right hand's colour in the overlay (blue).
-pub const RIGHT_COLOR: [u8; 3] = [30, 144, 255];
+pub(crate) const RIGHT_COLOR: [u8; 3] = [30, 144, 255];
 
 /// A photo and the hands the detector found in it.
 #[derive(Debug, Clone)]
@@ -359,7 +359,7 @@ fn draw_label(
 ///
 /// # Errors
 /// [`FitError::Invalid`] naming the folder.
-pub fn check_detect_out(out: &Path) -> Result<(), FitError> {
+pub(crate) fn check_detect_out(out: &Path) -> Result<(), FitError> {
     Ok(check_own_folder(
         out,
         DETECTION_JSON,
@@ -376,7 +376,7 @@ const DETECT_NAMES: [&str; 3] = [KEYPOINTS_JSON, OVERLAY, DETECTION_JSON];
 ///
 /// # Errors
 /// A folder that is not an earlier `detect-hands` output, or a write failure.
-pub fn write_detection_folder(out: &Path, files: &DetectionFiles) -> Result<(), FitError> {
+pub(crate) fn write_detection_folder(out: &Path, files: &DetectionFiles) -> Result<(), FitError> {
     Ok(write_own_folder(
         out,
         DETECTION_JSON,

@@ -176,11 +176,11 @@ impl FitConfig {
 }
 
 /// The fewest keypoints a hand needs to be fitted.
-pub const MIN_KEYPOINTS: usize = 6;
+pub(crate) const MIN_KEYPOINTS: usize = 6;
 
 /// Output joints that only the root rotation moves (wrist, thumb base, the four knuckles):
 /// the palm stage aligns these.
-pub const PALM_JOINTS: [usize; 6] = [0, 1, 5, 9, 13, 17];
+pub(crate) const PALM_JOINTS: [usize; 6] = [0, 1, 5, 9, 13, 17];
 
 /// Progress of one iteration.
 #[derive(Debug, Clone)]

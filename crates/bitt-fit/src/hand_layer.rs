@@ -425,7 +425,7 @@ pub fn rodrigues(w: Tensor<2>) -> Tensor<3> {
 ///
 /// # Shapes
 /// `[N, 6]` -> `[N, 3, 3]`
-pub fn rotation_from_6d(x: Tensor<2>) -> Tensor<3> {
+pub(crate) fn rotation_from_6d(x: Tensor<2>) -> Tensor<3> {
     let n = x.dims()[0];
     let normalize = |t: Tensor<2>| {
         let len = (t.clone().square().sum_dim(1) + 1e-20).sqrt();
@@ -441,14 +441,14 @@ pub fn rotation_from_6d(x: Tensor<2>) -> Tensor<3> {
 }
 
 /// The 6-D representation of a rotation matrix (its first two columns).
-pub fn rotation_to_6d(r: DMat3) -> [f64; 6] {
+pub(crate) fn rotation_to_6d(r: DMat3) -> [f64; 6] {
     [
         r.x_axis.x, r.x_axis.y, r.x_axis.z, r.y_axis.x, r.y_axis.y, r.y_axis.z,
     ]
 }
 
 /// A rotation matrix from host 6-D values (as [`rotation_from_6d`], in f64).
-pub fn rotation_from_6d_host(x: &[f64]) -> DMat3 {
+pub(crate) fn rotation_from_6d_host(x: &[f64]) -> DMat3 {
     let a1 = DVec3::new(x[0], x[1], x[2]);
     let a2 = DVec3::new(x[3], x[4], x[5]);
     let b1 = a1.normalize();
@@ -459,7 +459,7 @@ pub fn rotation_from_6d_host(x: &[f64]) -> DMat3 {
 /// Host parameters of both hands in the layer's form: `(root_6d, finger axis-angles, betas,
 /// trans)`, each flattened left then right. PCA and mean-relative poses are expanded to
 /// axis-angles with each hand's own model.
-pub fn host_params(
+pub(crate) fn host_params(
     models: &HandPair,
     hands: [&HandParams; 2],
 ) -> ([f64; 12], [f64; 90], [f64; 20], [f64; 6]) {

@@ -17,7 +17,7 @@ pub const FLEXION_RANGE: (f64, f64) = (-0.4, 2.0);
 
 /// Rotation about other axes than the flexion axis (abduction, twist) is kept below this
 /// (radians).
-pub const OFF_AXIS_LIMIT: f64 = 0.8;
+pub(crate) const OFF_AXIS_LIMIT: f64 = 0.8;
 
 /// The 20 bones of the 21 output joints (child, parent): each finger's chain from the wrist.
 pub fn bones() -> Vec<(usize, usize)> {
@@ -65,7 +65,7 @@ pub fn flexion_angles(pose: &[f64], axes: &[f64]) -> Vec<Option<f64>> {
 
 /// The priors' constants on a device.
 #[derive(Debug, Clone)]
-pub struct HandPriors {
+pub(crate) struct HandPriors {
     /// `[2, 15, 3]`
     axes: Tensor<3>,
     /// Bone children and parents, `[20]` each.
@@ -90,7 +90,7 @@ impl HandPriors {
     ///
     /// # Shapes
     /// `finger_pose [2, 45]` (axis-angles) -> `[2]`
-    pub fn limits(&self, finger_pose: Tensor<2>) -> Tensor<1> {
+    pub(crate) fn limits(&self, finger_pose: Tensor<2>) -> Tensor<1> {
         self.limits_within(finger_pose, FLEXION_RANGE)
     }
 
@@ -98,7 +98,7 @@ impl HandPriors {
     ///
     /// # Shapes
     /// `finger_pose [2, 45]` (axis-angles) -> `[2]`
-    pub fn limits_within(&self, finger_pose: Tensor<2>, range: (f64, f64)) -> Tensor<1> {
+    pub(crate) fn limits_within(&self, finger_pose: Tensor<2>, range: (f64, f64)) -> Tensor<1> {
         let aa = finger_pose.reshape([2, 15, 3]);
         let along = (aa.clone() * self.axes.clone()).sum_dim(2); // [2, 15, 1]
         let off = aa - self.axes.clone() * along.clone();
@@ -116,7 +116,7 @@ impl HandPriors {
     ///
     /// # Shapes
     /// `finger_pose [2, 45]` (axis-angles) -> `[2]`
-    pub fn off_axis(&self, finger_pose: Tensor<2>) -> Tensor<1> {
+    pub(crate) fn off_axis(&self, finger_pose: Tensor<2>) -> Tensor<1> {
         let aa = finger_pose.reshape([2, 15, 3]);
         let along = (aa.clone() * self.axes.clone()).sum_dim(2);
         let off = aa - self.axes.clone() * along;
@@ -128,7 +128,7 @@ impl HandPriors {
     ///
     /// # Shapes
     /// `joints [2, 21, 3]` -> `[1]`
-    pub fn penetration(&self, joints: Tensor<3>, radius: f64) -> Tensor<1> {
+    pub(crate) fn penetration(&self, joints: Tensor<3>, radius: f64) -> Tensor<1> {
         let points = |hand: usize| {
             let jh = joints.clone().narrow(0, hand, 1).reshape([21, 3]);
             let mid = (jh.clone().select(0, self.child.clone())

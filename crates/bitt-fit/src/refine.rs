@@ -209,7 +209,7 @@ pub const MASK_THRESHOLD: f32 = 0.15;
 /// noise and JPEG): IoU against the true silhouettes of the first 4 benchmark scenes at 128 px
 /// is 0.969 / 0.996 / 0.991 / 0.977 at 0.08, against 0.824 / 0.997 / 0.995 / 0.834 at 0.15
 /// (dark skin falls below it) and 0.943 / 0.993 / 0.970 / 0.960 at 0.05 (noise rises above).
-pub const SYNTHETIC_MASK_THRESHOLD: f32 = 0.08;
+pub(crate) const SYNTHETIC_MASK_THRESHOLD: f32 = 0.08;
 
 /// Threshold-mask components below this fraction of the largest are specks (the demo frames'
 /// point lights), not hands.
@@ -475,7 +475,7 @@ fn float<const D: usize>(v: Vec<f32>, shape: [usize; D], device: &Device) -> Ten
 
 /// Exact Euclidean distance (pixels) from every pixel to the nearest pixel of `mask`
 /// (`[H, W]`, > 0.5 is inside; 0 inside), Felzenszwalb and Huttenlocher's two passes.
-pub fn distance_to_mask(mask: &[f32], [h, w]: [usize; 2]) -> Vec<f32> {
+pub(crate) fn distance_to_mask(mask: &[f32], [h, w]: [usize; 2]) -> Vec<f32> {
     const INF: f64 = 1e20;
     let mut g = vec![0.0f64; h * w];
     for (i, m) in mask.iter().enumerate() {
@@ -1241,7 +1241,7 @@ pub fn silhouette(
 ///
 /// # Errors
 /// When a hand cannot be posed.
-pub fn silhouette_iou(
+pub(crate) fn silhouette_iou(
     models: &HandPair,
     hands: &TwoHandScene,
     scene: &bitt_render::scene::Scene,
@@ -1266,7 +1266,7 @@ pub fn vertex_error_px(
 
 /// The outline's closing radius at 256 px: gaps between touching fingers narrower than
 /// twice this count as inside the hands.
-pub const OUTLINE_CLOSING_PX_AT_256: f64 = 3.0;
+pub(crate) const OUTLINE_CLOSING_PX_AT_256: f64 = 3.0;
 
 /// The hands' outline `[h, w]` of a rendered silhouette: a morphological closing (square,
 /// `radius` pixels) that bridges slits between touching parts, then every region it encloses

@@ -23,7 +23,7 @@ use bitt_stdx::WithContext;
 use bitt_stdx::to_host;
 
 /// Side of each view of the `--views` grid.
-pub const VIEW_SIZE: usize = 256;
+pub(crate) const VIEW_SIZE: usize = 256;
 
 /// The default light of `bitt render`: brighter than the reference's training default
 /// (ambient 0.5, diffuse 0.1), from above and a little right of the camera (camera frame:

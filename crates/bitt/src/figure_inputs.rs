@@ -146,7 +146,7 @@ pub fn read_light(arg: &str) -> Result<LightValues, BittError> {
 /// # Errors
 /// A hand without a UV layout and no file, an unreadable file, or a layout whose face count
 /// is not its mesh's.
-pub fn hand_uvs(
+pub(crate) fn hand_uvs(
     models: &HandPair,
     uvs: Option<&Path>,
     uvs_left: Option<&Path>,
@@ -186,7 +186,7 @@ pub fn hand_uvs(
 ///
 /// # Errors
 /// An unreadable image, or one smaller than 2x2.
-pub fn image_tensor(
+pub(crate) fn image_tensor(
     path: &Path,
     what: &str,
     device: &Device,

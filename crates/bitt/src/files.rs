@@ -17,33 +17,33 @@ pub const CHECKPOINT: &str = "checkpoint.safetensors";
 pub const CHECKPOINT_PREVIOUS: &str = "checkpoint.previous.safetensors";
 /// Metrics and loss history: the same bytes for a resumed run as for an uninterrupted
 /// one (no timings; those are in [`TIMING`]).
-pub const METRICS: &str = "metrics.json";
+pub(crate) const METRICS: &str = "metrics.json";
 /// How long training took (seconds, iterations).
-pub const TIMING: &str = "timing.json";
+pub(crate) const TIMING: &str = "timing.json";
 /// The estimated light.
 pub const LIGHT: &str = "light.json";
 /// The report.
 pub const REPORT: &str = "report.html";
 /// The avatar.
-pub const AVATAR: &str = "avatar.glb";
+pub(crate) const AVATAR: &str = "avatar.glb";
 /// The per-hand avatars for WebXR hand tracking (`left.glb`, `right.glb`, `xr.html`).
 pub const XR: &str = "xr";
 /// Loss curves.
-pub const LOSS_PLOT: &str = "loss.png";
+pub(crate) const LOSS_PLOT: &str = "loss.png";
 /// The scene a run was trained on (synthetic runs), to resume without the generator.
-pub const SCENE: &str = "scene";
+pub(crate) const SCENE: &str = "scene";
 /// The mesh refinement's report (`train-scene --refine-mesh`, `bitt refine-hands`).
-pub const REFINE: &str = "refine.json";
+pub(crate) const REFINE: &str = "refine.json";
 /// The photo with the mesh outlines before (red) and after (green) refinement.
-pub const REFINE_OVERLAY: &str = "overlay.png";
+pub(crate) const REFINE_OVERLAY: &str = "overlay.png";
 /// Scores of a real multi-view run against the photographs of its novel views and poses.
 pub const REAL_SCORES: &str = "real_scores.json";
 /// The trained textures and light parameters (what `render-avatar` and `export` read).
-pub const TEXTURES: &str = "textures/textures.safetensors";
+pub(crate) const TEXTURES: &str = "textures/textures.safetensors";
 
 /// Reads the fine textures `[3, T]` (left, right) of a run's
 /// `textures/textures.safetensors`.
-pub fn read_fine_textures(dir: &Path) -> Result<[Vec<f32>; 2], BittError> {
+pub(crate) fn read_fine_textures(dir: &Path) -> Result<[Vec<f32>; 2], BittError> {
     let path = dir.join(TEXTURES);
     let bytes = st::read_file(&path)?;
     let r = st::Reader::open(&bytes, &path)?;

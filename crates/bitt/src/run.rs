@@ -38,14 +38,17 @@ type PngSink<'a> = dyn FnMut(&str, PathBuf, &[f32], usize, usize) -> Result<(), 
 type Scored = (ViewScore, Vec<f32>, Vec<f32>, Vec<f32>);
 
 /// Writes a real run's scores ([`crate::real::score_real`]) to [`files::REAL_SCORES`].
-pub fn write_real_scores(out: &Path, scores: &crate::real::RealScores) -> Result<(), BittError> {
+pub(crate) fn write_real_scores(
+    out: &Path,
+    scores: &crate::real::RealScores,
+) -> Result<(), BittError> {
     Ok(write_json(&out.join(files::REAL_SCORES), scores)?)
 }
 
 /// Writes a refinement's record into a run folder: `refine.json` (the report and whatever
 /// the caller adds) and `overlay.png`. [`write_run`] puts both into `metrics.json` and the
 /// report when they are there.
-pub fn write_refinement(
+pub(crate) fn write_refinement(
     dir: &Path,
     record: &serde_json::Value,
     overlay: &[f32],
@@ -59,7 +62,7 @@ pub fn write_refinement(
 /// the overlay on the training view (outlines of the given and the refined hands) and
 /// `refine.json` with the report, plus, when the true hands are known (a synthetic scene),
 /// the projected vertex errors before and after.
-pub fn write_training_refinement(
+pub(crate) fn write_training_refinement(
     dir: &Path,
     trainer: &Trainer,
     refinement: &crate::refine::Refinement,
@@ -170,7 +173,7 @@ pub struct RunSummary {
 }
 
 /// The hands of a synthetic scene's novel poses, for the avatar's clip.
-pub fn novel_pose_clip(scene: &SynthScene) -> Vec<TwoHandScene> {
+pub(crate) fn novel_pose_clip(scene: &SynthScene) -> Vec<TwoHandScene> {
     scene.novel_poses.iter().map(|v| v.hands.clone()).collect()
 }
 
@@ -898,7 +901,7 @@ impl SavedAvatar {
 /// A view's geometry seen from its camera orbited about `center` (camera frame) by `yaw` and
 /// `pitch` radians (as [`orbit_camera`]), with the orbited scene camera: the camera-frame
 /// vertices are turned instead of the camera, so no hand parameters are needed.
-pub fn orbit_geometry(
+pub(crate) fn orbit_geometry(
     geometry: &ViewGeometry,
     center: DVec3,
     yaw: f64,

@@ -21,7 +21,7 @@ use crate::trainer::{Trainer, previous_checkpoint_path};
 
 /// What is wrong when run folder `dir` holds neither input record: `input.json` (a real
 /// run) nor `scene/scene.json` (a synthetic run); `None` when it holds one.
-pub fn missing_input(dir: &Path) -> Option<String> {
+pub(crate) fn missing_input(dir: &Path) -> Option<String> {
     let scene = dir.join(files::SCENE).join("scene.json");
     (!RealInput::is_real_run(dir) && !scene.is_file()).then(|| {
         format!(
@@ -34,13 +34,13 @@ pub fn missing_input(dir: &Path) -> Option<String> {
 }
 
 /// The keypoint fit's record in a run folder (`train-scene --keypoints`).
-pub const FIT_RECORD: &str = "fit.json";
+pub(crate) const FIT_RECORD: &str = "fit.json";
 
 /// The keypoint fit's overlay in a run folder.
-pub const FIT_OVERLAY: &str = "fit_overlay.png";
+pub(crate) const FIT_OVERLAY: &str = "fit_overlay.png";
 
 /// Names a run writes at the top of its folder.
-pub const RUN_NAMES: [&str; 25] = [
+pub(crate) const RUN_NAMES: [&str; 25] = [
     files::CONFIG,
     files::CHECKPOINT,
     files::CHECKPOINT_PREVIOUS,
@@ -70,7 +70,7 @@ pub const RUN_NAMES: [&str; 25] = [
 
 /// What an output folder holds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum OutFolder {
+pub(crate) enum OutFolder {
     /// Missing or empty: a new run may go there.
     Free,
     /// A run of ours (a checkpoint).
@@ -86,7 +86,7 @@ pub enum OutFolder {
 ///
 /// # Errors
 /// A dangling symbolic link, a file, or an unreadable folder.
-pub fn out_folder(dir: &Path) -> Result<OutFolder, BittError> {
+pub(crate) fn out_folder(dir: &Path) -> Result<OutFolder, BittError> {
     if dir.is_symlink() && !dir.exists() {
         return Err(BittError::Invalid(format!(
             "{}: is a symbolic link to nothing; choose another --out",
@@ -222,7 +222,7 @@ impl RunInput {
     }
 
     /// The poses the rigged avatar's clip plays: the scene's novel poses.
-    pub fn novel_pose_clip(&self) -> Vec<TwoHandScene> {
+    pub(crate) fn novel_pose_clip(&self) -> Vec<TwoHandScene> {
         match self {
             RunInput::Synthetic(scene) => crate::run::novel_pose_clip(scene),
             RunInput::Real(_, scene) => scene.novel_poses.iter().map(|p| p.hands.clone()).collect(),
@@ -257,7 +257,7 @@ pub fn check_utf8_paths(paths: &[(&str, Option<&Path>)]) -> Result<(), BittError
 ///
 /// # Errors
 /// A file that cannot be written.
-pub fn write_fresh_run(
+pub(crate) fn write_fresh_run(
     out: &Path,
     trainer: &Trainer,
     input: &RunInput,
@@ -288,13 +288,13 @@ pub fn write_fresh_run(
 }
 
 /// Whether `dir` holds a checkpoint (the latest or the previous one).
-pub fn has_checkpoint(dir: &Path) -> bool {
+pub(crate) fn has_checkpoint(dir: &Path) -> bool {
     dir.join(files::CHECKPOINT).exists() || dir.join(files::CHECKPOINT_PREVIOUS).exists()
 }
 
 /// Whether `dir` holds a run that finished writing its results: its configuration, metrics
 /// and textures (with or without its checkpoints).
-pub fn is_finished_run(dir: &Path) -> bool {
+pub(crate) fn is_finished_run(dir: &Path) -> bool {
     dir.join(files::CONFIG).is_file()
         && dir.join(files::METRICS).is_file()
         && dir.join(files::TEXTURES).is_file()

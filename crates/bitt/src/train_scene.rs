@@ -141,7 +141,7 @@ pub struct FreshRequest<'a> {
 /// What a fresh run starts from: its trainer, its input, and the refinement and keypoint
 /// fit made before training.
 #[derive(Debug)]
-pub struct FreshRun {
+pub(crate) struct FreshRun {
     /// The trainer at iteration 0.
     pub trainer: Trainer,
     /// The run's input.
@@ -153,14 +153,14 @@ pub struct FreshRun {
 }
 
 /// The line a photo-only run ([`SceneInput::Photo`]) starts with.
-pub const PHOTO_ONLY_LINE: &str = "photo only: detecting both hands, fitting them to the keypoints, refining against the photo, then training";
+pub(crate) const PHOTO_ONLY_LINE: &str = "photo only: detecting both hands, fitting them to the keypoints, refining against the photo, then training";
 
 /// The procedural texture PCA of `config.texture`, from the cache or fitted (with a progress
 /// display) and cached.
 ///
 /// # Errors
 /// Reading or writing the cache.
-pub fn procedural_prior(
+pub(crate) fn procedural_prior(
     config: &TrainConfig,
     cache: Option<&Path>,
     device: &Device,
@@ -179,7 +179,7 @@ pub fn procedural_prior(
 ///
 /// # Errors
 /// Any input that cannot be read or is not what it should be, naming it.
-pub fn fresh_run(
+pub(crate) fn fresh_run(
     request: &FreshRequest<'_>,
     config: TrainConfig,
     device: &Device,

@@ -102,7 +102,7 @@ impl Method {
     }
 
     /// Parses [`Method::key`].
-    pub fn from_key(key: &str) -> Option<Method> {
+    pub(crate) fn from_key(key: &str) -> Option<Method> {
         Method::ALL.into_iter().find(|m| m.key() == key)
     }
 
@@ -149,7 +149,7 @@ impl Method {
     }
 
     /// The trainer configuration of a BiTT variant (`None` for the baselines).
-    pub fn bitt_config(self, base: &TrainConfig) -> Option<TrainConfig> {
+    pub(crate) fn bitt_config(self, base: &TrainConfig) -> Option<TrainConfig> {
         let mut c = base.clone();
         match self {
             Method::Bitt | Method::BittRefined => {}
@@ -250,7 +250,7 @@ pub struct SceneResult {
 }
 
 /// The `format` of a [`SceneResult`] file.
-pub const SCENE_RESULT_FORMAT: &str = "bitt-eval-scene-1";
+pub(crate) const SCENE_RESULT_FORMAT: &str = "bitt-eval-scene-1";
 
 #[cfg(test)]
 mod tests {

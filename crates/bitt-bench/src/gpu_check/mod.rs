@@ -23,11 +23,11 @@ use crate::nets_bench::BenchedNet;
 use bitt::BittError;
 
 /// Training iterations on a GPU adapter unless told otherwise.
-pub const GPU_ITERATIONS: usize = 30;
+pub(crate) const GPU_ITERATIONS: usize = 30;
 /// Training iterations on a CPU adapter unless told otherwise.
-pub const CPU_ADAPTER_ITERATIONS: usize = 3;
+pub(crate) const CPU_ADAPTER_ITERATIONS: usize = 3;
 /// The paper's iterations per scene, which the training time is projected to.
-pub const PAPER_ITERATIONS: usize = 700;
+pub(crate) const PAPER_ITERATIONS: usize = 700;
 
 /// What kind of device the adapter is (wgpu's `DeviceType`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -278,7 +278,7 @@ impl GpuCheckReport {
 }
 
 /// Runs `stage`, timing it and turning an error or a panic into a failed report.
-pub fn run_stage(
+pub(crate) fn run_stage(
     name: &str,
     stage: impl FnOnce() -> Result<StageOutcome, BittError>,
 ) -> StageReport {

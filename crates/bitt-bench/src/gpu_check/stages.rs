@@ -25,13 +25,13 @@ use bitt_stdx::to_host;
 
 /// Largest mean absolute difference of the demo render allowed between the device and the
 /// host (values in `[0, 1]`; `cargo xtask e2e` uses the same bound).
-pub const RENDER_MEAN_TOLERANCE: f64 = 1e-3;
+pub(crate) const RENDER_MEAN_TOLERANCE: f64 = 1e-3;
 /// UV side of the demo render's procedural skin (`cargo xtask e2e` renders at 256 too).
-pub const RENDER_UV_SIZE: usize = 256;
+pub(crate) const RENDER_UV_SIZE: usize = 256;
 /// The demo render's procedural skin (`bitt render`'s default person).
-pub const RENDER_SKIN_SEED: u64 = 7;
+pub(crate) const RENDER_SKIN_SEED: u64 = 7;
 /// Timed runs of each network bench (the first includes compiling the device's kernels).
-pub const BENCH_RUNS: usize = 3;
+pub(crate) const BENCH_RUNS: usize = 3;
 
 fn ok(summary: String, data: serde_json::Value) -> StageOutcome {
     StageOutcome {
@@ -94,7 +94,7 @@ fn demo_hands() -> Result<([FigureHand; 2], PinholeCamera), BittError> {
 /// The demo render of `bitt render --procedural --demo --uv-size 256` (both hands under the
 /// default light, antialiased) on `device` and on `host`; fails when the mean absolute
 /// difference reaches [`RENDER_MEAN_TOLERANCE`] or the image is (almost) black.
-pub fn render_comparison(device: &Device, host: &Device) -> Result<StageOutcome, BittError> {
+pub(crate) fn render_comparison(device: &Device, host: &Device) -> Result<StageOutcome, BittError> {
     let (hands, camera) = demo_hands()?;
     let models = procedural_pair();
     let uvs = [hands[0].uv.clone(), hands[1].uv.clone()];
@@ -167,7 +167,7 @@ pub fn render_comparison(device: &Device, host: &Device) -> Result<StageOutcome,
 /// against the CPU core (`bitt_render::cpu::rasterize`) on the same clip positions: face ids
 /// that differ (and how many of them are exact depth ties, which the check allows), the
 /// kernel that ran and the renderer's host readbacks during the call. A second call is timed.
-pub fn raster_comparison(device: &Device) -> Result<StageOutcome, BittError> {
+pub(crate) fn raster_comparison(device: &Device) -> Result<StageOutcome, BittError> {
     let (hands, camera) = demo_hands()?;
     let meshes = [
         textured_mesh(&hands[0].model)?,
@@ -254,7 +254,7 @@ pub fn raster_comparison(device: &Device) -> Result<StageOutcome, BittError> {
 /// The training iterations' timing: `first` (which compiles the device's kernels) and the
 /// mean of the rest, projected to [`PAPER_ITERATIONS`] as the first plus 699 of the rest's
 /// mean (the first alone when only one ran).
-pub fn projected_seconds(seconds: &[f64]) -> Option<(f64, f64, f64)> {
+pub(crate) fn projected_seconds(seconds: &[f64]) -> Option<(f64, f64, f64)> {
     let (&first, rest) = seconds.split_first()?;
     let steady = if rest.is_empty() {
         first
@@ -331,7 +331,7 @@ pub fn training(
 
 /// [`bench_net`] of BTR or the albedo U-Net at `preset` on `device`, [`BENCH_RUNS`] runs:
 /// the first (kernel compilation included) and the fastest.
-pub fn net_bench(
+pub(crate) fn net_bench(
     device: &Device,
     net: BenchedNet,
     preset: Preset,

@@ -334,7 +334,7 @@ pub fn fit_photo(
 ///
 /// # Errors
 /// Hands that cannot be posed.
-pub fn keypoint_residuals(
+pub(crate) fn keypoint_residuals(
     models: &HandPair,
     hands: &TwoHandScene,
     keypoints: &TwoHandKeypoints,

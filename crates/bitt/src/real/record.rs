@@ -15,12 +15,12 @@ use crate::trainer::Trainer;
 /// Names of a real run's input files.
 pub mod files {
     /// The [`super::RealInput`] record.
-    pub const INPUT: &str = "input.json";
+    pub(crate) const INPUT: &str = "input.json";
     /// Folder of the prepared input images.
-    pub const INPUT_DIR: &str = "input";
+    pub(crate) const INPUT_DIR: &str = "input";
     /// The exact prepared images, `f32` `[3, S, S]`, one tensor per view name (`train`,
     /// `view_00`, ..., `pose_00`, ...).
-    pub const IMAGES: &str = "input/images.safetensors";
+    pub(crate) const IMAGES: &str = "input/images.safetensors";
 }
 
 /// Format tag of `input.json`.
@@ -114,7 +114,7 @@ pub struct RealInput {
 
 impl RealInput {
     /// Whether `dir` holds a real run (an `input.json`).
-    pub fn is_real_run(dir: &Path) -> bool {
+    pub(crate) fn is_real_run(dir: &Path) -> bool {
         dir.join(files::INPUT).is_file()
     }
 
@@ -135,7 +135,7 @@ impl RealInput {
     }
 
     /// The prepared views of a real run in `dir` (exact images from `input/images.safetensors`).
-    pub fn read_scene(&self, dir: &Path, size: usize) -> Result<RealScene, BittError> {
+    pub(crate) fn read_scene(&self, dir: &Path, size: usize) -> Result<RealScene, BittError> {
         let path = dir.join(files::IMAGES);
         let bytes = std::fs::read(&path).map_err(|e| BittError::io(&path, e))?;
         let view = |r: &ViewRecord| -> Result<RealView, BittError> {

@@ -294,7 +294,7 @@ pub fn read_mask(path: &Path, [h, w]: [usize; 2]) -> Result<Vec<f32>, BittError>
 /// The largest fraction of a photo that a given hand mask may mark as hand: both hands must
 /// be in view, so they cannot fill it (the demo frames' hands and forearms cover 37%). An
 /// all-white mask used to blow the hands up to fill the frame.
-pub const MAX_MASK_FRACTION: f64 = 0.9;
+pub(crate) const MAX_MASK_FRACTION: f64 = 0.9;
 
 /// Refines the hands of a BiTT annotation (pickle or `hands.json`) against its photo, at
 /// `size` x `size` (the photo is cropped around the hands as the reference does and resized;
