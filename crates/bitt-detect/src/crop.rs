@@ -53,7 +53,7 @@ impl Rect {
 
     /// MediaPipe's `RectTransformationCalculator`: shift by a fraction of the size along
     /// the rectangle's own axes, make it square on its long side, scale.
-    pub fn transformed(&self, scale: f64, shift: [f64; 2]) -> Rect {
+    pub(crate) fn transformed(&self, scale: f64, shift: [f64; 2]) -> Rect {
         let (s, c) = self.rotation.sin_cos();
         let [w, h] = self.size;
         let dx = w * shift[0] * c - h * shift[1] * s;
@@ -88,13 +88,13 @@ impl Rect {
 
 /// The angle (radians, in `(-π, π]`) that turns the direction `from -> to` on the image into
 /// "up": MediaPipe's `target_angle - atan2(-(y1 - y0), x1 - x0)` with a 90° target.
-pub fn rotation_to_up(from: [f64; 2], to: [f64; 2]) -> f64 {
+pub(crate) fn rotation_to_up(from: [f64; 2], to: [f64; 2]) -> f64 {
     let r = std::f64::consts::FRAC_PI_2 - (-(to[1] - from[1])).atan2(to[0] - from[0]);
     normalize_angle(r)
 }
 
 /// `a` wrapped into `(-π, π]`.
-pub fn normalize_angle(a: f64) -> f64 {
+pub(crate) fn normalize_angle(a: f64) -> f64 {
     use std::f64::consts::PI;
     a - 2.0 * PI * ((a + PI) / (2.0 * PI)).floor()
 }

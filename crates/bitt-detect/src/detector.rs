@@ -13,13 +13,13 @@ use crate::{DetectError, NUM_LANDMARKS};
 
 /// The weights built into the binary: MediaPipe Hands' full palm detector and hand landmark
 /// model (Apache-2.0, mediapipe 0.10.21), fp16, converted by `cargo xtask convert-mediapipe`.
-pub const BUILTIN_WEIGHTS: &[u8] = include_bytes!("../assets/mediapipe_hands.safetensors");
+pub(crate) const BUILTIN_WEIGHTS: &[u8] = include_bytes!("../assets/mediapipe_hands.safetensors");
 
 /// What names the built-in weights in errors.
-pub const BUILTIN_NAME: &str = "<built-in MediaPipe Hands weights>";
+pub(crate) const BUILTIN_NAME: &str = "<built-in MediaPipe Hands weights>";
 
 /// Input side of the hand landmark model.
-pub const LANDMARK_INPUT: usize = 224;
+pub(crate) const LANDMARK_INPUT: usize = 224;
 
 /// One hand as the landmark model sees it in one crop.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -38,7 +38,7 @@ pub struct HandLandmarks {
 
 /// The palm detector's raw outputs for one image.
 #[derive(Debug, Clone, PartialEq)]
-pub struct PalmOutput {
+pub(crate) struct PalmOutput {
     /// `[2016 · 18]`: per anchor the box (x, y, w, h) and 7 keypoints, in input pixels
     /// relative to the anchor.
     pub regressors: Vec<f32>,
@@ -48,7 +48,7 @@ pub struct PalmOutput {
 
 /// The landmark model's raw outputs for one image.
 #[derive(Debug, Clone, PartialEq)]
-pub struct LandmarkOutput {
+pub(crate) struct LandmarkOutput {
     /// `[21 · 3]`: x, y in crop pixels and a relative depth.
     pub screen: Vec<f32>,
     /// Hand presence, a probability.
@@ -80,7 +80,11 @@ impl HandDetector {
     ///
     /// # Errors
     /// A malformed file, or networks of the wrong input or output shapes.
-    pub fn from_weights(bytes: &[u8], origin: &Path, device: &Device) -> Result<Self, DetectError> {
+    pub(crate) fn from_weights(
+        bytes: &[u8],
+        origin: &Path,
+        device: &Device,
+    ) -> Result<Self, DetectError> {
         let palm = Network::new(
             graph::from_safetensors(bytes, PALM, origin)?,
             device,
@@ -149,7 +153,7 @@ impl HandDetector {
     ///
     /// # Errors
     /// A wrongly sized input, or a failed readback.
-    pub fn palm_raw(&self, input: Tensor<4>) -> Result<Vec<PalmOutput>, DetectError> {
+    pub(crate) fn palm_raw(&self, input: Tensor<4>) -> Result<Vec<PalmOutput>, DetectError> {
         let n = input.dims()[0];
         let mut out = self.palm.forward(input)?;
         let reg = bitt_stdx::to_host(out.remove("Identity").expect("checked output"))?;
@@ -170,7 +174,10 @@ impl HandDetector {
     ///
     /// # Errors
     /// A wrongly sized input, or a failed readback.
-    pub fn landmark_raw(&self, input: Tensor<4>) -> Result<Vec<LandmarkOutput>, DetectError> {
+    pub(crate) fn landmark_raw(
+        &self,
+        input: Tensor<4>,
+    ) -> Result<Vec<LandmarkOutput>, DetectError> {
         let n = input.dims()[0];
         let mut out = self.landmark.forward(input)?;
         let mut take = |name: &str| -> Result<Vec<f32>, DetectError> {

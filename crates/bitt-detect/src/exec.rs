@@ -219,7 +219,7 @@ impl Network {
     }
 
     /// The input's `[H, W]`.
-    pub fn input_size(&self) -> [usize; 2] {
+    pub(crate) fn input_size(&self) -> [usize; 2] {
         let s = self.graph.input_shape();
         [
             s.get(1).copied().unwrap_or(0),

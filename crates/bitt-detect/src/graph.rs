@@ -320,7 +320,7 @@ pub const FORMAT: &str = "bitt-detect weights";
 /// The networks' names in the weights file.
 pub const PALM: &str = "palm_detection";
 /// See [`PALM`].
-pub const LANDMARK: &str = "hand_landmark";
+pub(crate) const LANDMARK: &str = "hand_landmark";
 
 /// Encodes graphs as one safetensors file: each graph's JSON under its name in the
 /// metadata, its constants as fp16 tensors `{name}.t{id}`, plus `notice` (where the weights

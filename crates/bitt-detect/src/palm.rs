@@ -5,11 +5,11 @@
 use crate::crop::{Rect, rotation_to_up};
 
 /// Input side of the palm detector.
-pub const PALM_INPUT: usize = 192;
+pub(crate) const PALM_INPUT: usize = 192;
 /// Numbers per anchor in the regressor output: box (x, y, w, h) + 7 keypoints (x, y).
-pub const PALM_VALUES: usize = 18;
+pub(crate) const PALM_VALUES: usize = 18;
 /// Number of anchors: 24² · 2 (stride 8) + 12² · 6 (three stride-16 layers merged).
-pub const PALM_ANCHORS: usize = 2016;
+pub(crate) const PALM_ANCHORS: usize = 2016;
 
 /// A palm found by the detector, in continuous pixels of the photo.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -104,7 +104,7 @@ pub fn iou(a: &Palm, b: &Palm) -> f64 {
 /// MediaPipe's weighted non-maximum suppression (`non_max_suppression_calculator`,
 /// `WEIGHTED`, IoU): the best remaining detection absorbs every detection overlapping it by
 /// more than `threshold`, its box and keypoints becoming their score-weighted mean.
-pub fn weighted_nms(mut palms: Vec<Palm>, threshold: f64) -> Vec<Palm> {
+pub(crate) fn weighted_nms(mut palms: Vec<Palm>, threshold: f64) -> Vec<Palm> {
     palms.sort_by(|a, b| b.score.total_cmp(&a.score));
     let mut out = Vec::new();
     while !palms.is_empty() {

@@ -209,7 +209,7 @@ impl Candidate {
 /// The hand rectangle from landmarks (MediaPipe's `hand_landmark_landmarks_to_roi`: rotation
 /// from the wrist towards the middle of the index/ring and middle finger bases, the box in
 /// that rotation, scale 2.0, shift_y -0.1).
-pub fn rect_from_landmarks(points: &[[f64; 3]]) -> Rect {
+pub(crate) fn rect_from_landmarks(points: &[[f64; 3]]) -> Rect {
     let p = |i: usize| [points[i][0], points[i][1]];
     let mid = |a: [f64; 2], b: [f64; 2]| [(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0];
     let base = mid(mid(p(5), p(13)), p(9));

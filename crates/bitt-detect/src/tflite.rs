@@ -46,7 +46,7 @@ struct TensorInfo {
 /// # Errors
 /// A malformed file, an operation or option this crate does not implement, or shapes that
 /// do not fit together.
-pub fn read_tflite(bytes: &[u8], path: &Path) -> Result<Graph, DetectError> {
+pub(crate) fn read_tflite(bytes: &[u8], path: &Path) -> Result<Graph, DetectError> {
     parse(bytes, path).map_err(|e| match e {
         Parse::Fb(detail) => DetectError::model(path, detail),
         Parse::Detect(e) => e,
@@ -455,7 +455,7 @@ fn parse(bytes: &[u8], path: &Path) -> Result<Graph, Parse> {
 }
 
 /// Where the two models lie in the mediapipe 0.10.21 wheel.
-pub const WHEEL_MODELS: [(&str, &str); 2] = [
+pub(crate) const WHEEL_MODELS: [(&str, &str); 2] = [
     (
         crate::graph::PALM,
         "mediapipe/modules/palm_detection/palm_detection_full.tflite",
@@ -467,7 +467,7 @@ pub const WHEEL_MODELS: [(&str, &str); 2] = [
 ];
 
 /// The notice stored with the converted weights.
-pub const NOTICE: &str = "MediaPipe Hands palm_detection_full and hand_landmark_full (mediapipe 0.10.21 wheel), Copyright Google LLC, Apache License 2.0 (crates/bitt-detect/assets/LICENSE-mediapipe.txt); converted to fp16 graphs by bitt-detect.";
+pub(crate) const NOTICE: &str = "MediaPipe Hands palm_detection_full and hand_landmark_full (mediapipe 0.10.21 wheel), Copyright Google LLC, Apache License 2.0 (crates/bitt-detect/assets/LICENSE-mediapipe.txt); converted to fp16 graphs by bitt-detect.";
 
 /// Reads both models from an unpacked mediapipe 0.10.21 wheel (`wheel_dir`) and encodes them
 /// as the weights file ([`crate::graph::to_safetensors`]); `out` names it in errors.

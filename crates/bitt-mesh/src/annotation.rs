@@ -229,7 +229,7 @@ fn hand_from_bitt(v: &Value, side: Side, path: &Path) -> Result<Option<HandParam
 /// Reads a BiTT/InterHand annotation pickle (the demo `NN.pkl` layout) already parsed into
 /// `root`. `image_size` is the size of the image `K` refers to ([`BITT_CROP_SIZE`] for the
 /// reference's crops).
-pub fn scene_from_bitt_annotation(
+pub(crate) fn scene_from_bitt_annotation(
     root: &Value,
     path: &Path,
     image_size: (u32, u32),
@@ -382,7 +382,7 @@ pub fn bitt_annotation_from_bytes(
 // hands.json: refined hands (axis-angle poses) and their camera.
 
 /// The `format` value of a `hands.json`.
-pub const HANDS_JSON_FORMAT: &str = "bitt-hands/1";
+pub(crate) const HANDS_JSON_FORMAT: &str = "bitt-hands/1";
 
 #[derive(serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -482,7 +482,7 @@ pub fn hands_json(scene: &TwoHandScene, models: &HandPair) -> Result<String, Mes
 /// # Errors
 /// [`bitt_stdx::FileError::Format`] for malformed JSON, a wrong `format`, wrong lengths, NaN, no hand,
 /// or an invalid rotation or camera.
-pub fn scene_from_hands_json(bytes: &[u8], path: &Path) -> Result<TwoHandScene, MeshError> {
+pub(crate) fn scene_from_hands_json(bytes: &[u8], path: &Path) -> Result<TwoHandScene, MeshError> {
     let file: HandsJson = serde_json::from_slice(bytes)
         .map_err(|e| MeshError::format(path, format!("not a hands.json: {e}")))?;
     if file.format != HANDS_JSON_FORMAT {
@@ -675,7 +675,7 @@ pub fn pixel_box_lines(scene: &TwoHandScene, posed: &PosedTwoHands, json: bool) 
 /// are axis-angles relative to the mean pose, the camera translation is `-R campos / 1000`
 /// (millimetres to metres), and `K` comes from `focal` and `princpt` for the full image of
 /// `image_size`.
-pub fn scene_from_interhand_json(
+pub(crate) fn scene_from_interhand_json(
     mano: &serde_json::Value,
     cameras: &serde_json::Value,
     frame: &InterHandFrame,

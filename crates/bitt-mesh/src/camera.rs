@@ -48,7 +48,7 @@ pub fn parse_intrinsics(text: &str) -> Result<[f64; 4], String> {
 /// The focal lengths `--intrinsics` may give, as multiples of the photo's long side: a
 /// fisheye-wide 0.05 to a telephoto 100. Outside, the fit's residuals are meaningless
 /// (infinite at 1e-30) rather than large (issue 38).
-pub const FOCAL_RANGE_OF_LONG_SIDE: [f64; 2] = [0.05, 100.0];
+pub(crate) const FOCAL_RANGE_OF_LONG_SIDE: [f64; 2] = [0.05, 100.0];
 
 /// Checks `--intrinsics` against the photo (`[w, h]` pixels): focal lengths within
 /// [`FOCAL_RANGE_OF_LONG_SIDE`], the principal point within the image widened by its own size

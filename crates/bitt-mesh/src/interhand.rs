@@ -54,13 +54,13 @@ use crate::annotation::{InterHandFrame, TwoHandScene, scene_from_interhand_json}
 use bitt_stdx::FileErrorExt;
 
 /// Cameras the reference's data preparation drops (besides every `41xxxx` camera).
-pub const DROP_VIEWS: [&str; 9] = [
+pub(crate) const DROP_VIEWS: [&str; 9] = [
     "400006", "400008", "400015", "400016", "400029", "400030", "400031", "400035", "400049",
 ];
 
 /// Images darker than this mean value (of `[0, 1]` RGB) are not selected (the reference's
 /// `img.mean() < 10` on 0..255).
-pub const DARK_IMAGE_MEAN: f64 = 10.0 / 255.0;
+pub(crate) const DARK_IMAGE_MEAN: f64 = 10.0 / 255.0;
 
 /// Novel views and novel poses per scene in the paper (Sec. 4.1: 8 and 8).
 pub const PAPER_NOVEL_VIEWS: usize = 8;
@@ -288,7 +288,7 @@ impl Truthy {
 }
 
 /// Whether the reference's data preparation drops a camera.
-pub fn camera_dropped(camera: &str) -> bool {
+pub(crate) fn camera_dropped(camera: &str) -> bool {
     camera.starts_with("41") || DROP_VIEWS.contains(&camera)
 }
 
@@ -718,7 +718,7 @@ impl InterHandDataset {
 
 /// Indices `0..m` in selection order: `n` evenly spaced ones (`floor((2k + 1) m / 2n)`)
 /// first, then the others in increasing order (replacements).
-pub fn spread_order(m: usize, n: usize) -> Vec<usize> {
+pub(crate) fn spread_order(m: usize, n: usize) -> Vec<usize> {
     if n == 0 {
         return Vec::new();
     }
@@ -735,7 +735,7 @@ pub fn spread_order(m: usize, n: usize) -> Vec<usize> {
 
 /// Mean of an image's RGB values in `[0, 1]`; fails naming the file when it is missing or
 /// cannot be decoded.
-pub fn image_mean(path: &Path) -> Result<f64, MeshError> {
+pub(crate) fn image_mean(path: &Path) -> Result<f64, MeshError> {
     if !path.is_file() {
         return Err(MeshError::io(
             path,

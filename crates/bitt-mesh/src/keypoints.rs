@@ -96,21 +96,21 @@ pub struct Keypoint {
 
 /// The least diagonal (pixels) of the bounding box of a hand's present points: below it the
 /// points are one spot, not a hand (normalised coordinates read as pixels span about 1 px).
-pub const MIN_HAND_SPAN_PX: f64 = 8.0;
+pub(crate) const MIN_HAND_SPAN_PX: f64 = 8.0;
 
 /// The least thickness of a hand's points (the standard deviation across their main
 /// direction over the one along it): real hands measure 0.75 to 0.82 on the demo frames'
 /// detections, points on a line 0.
-pub const MIN_HAND_THICKNESS: f64 = 0.05;
+pub(crate) const MIN_HAND_THICKNESS: f64 = 0.05;
 
 /// The highest confidence a hand's points must reach: below it the detector found nothing
 /// there.
-pub const MIN_HAND_CONFIDENCE: f64 = 1e-3;
+pub(crate) const MIN_HAND_CONFIDENCE: f64 = 1e-3;
 
 /// The least mean distance between the two hands' corresponding points, as a fraction of the
 /// larger hand's span: interlocked hands in the demo frames are 0.12 and 0.36 apart, a hand's
 /// points copied into the other hand 0.
-pub const MIN_HANDS_APART: f64 = 0.03;
+pub(crate) const MIN_HANDS_APART: f64 = 0.03;
 
 /// The keypoint file formats this module reads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -376,7 +376,7 @@ pub struct KeypointOptions {
 /// `hand_landmarks`, `landmarks`, `multi_hand_landmarks` (or one of MediaPipe's handedness
 /// keys) MediaPipe; `left` or `right` plain. `None` for anything else, including JSON that is
 /// not an object. The keys' contents are checked when the file is read, not here.
-pub fn guess_format(value: &Value) -> Option<KeypointFormat> {
+pub(crate) fn guess_format(value: &Value) -> Option<KeypointFormat> {
     let obj = value.as_object()?;
     if obj.contains_key("people") {
         Some(KeypointFormat::OpenPose)

@@ -76,7 +76,7 @@ fn array<'a>(
 ///
 /// `path` is only used in error messages. The vertex count is read from `v_template`, so any
 /// MANO-structured file loads; the fingertip vertices are MANO's and must exist.
-pub fn hand_model_from_pickle(
+pub(crate) fn hand_model_from_pickle(
     root: &Value,
     side: Side,
     path: &Path,
@@ -225,7 +225,7 @@ pub fn load_mano_pkl(path: &Path, side: Side) -> Result<HandModel, MeshError> {
 /// right's (`sum |L - R| < 1` over `shapedirs[:, 0, :]`), the left ones are negated.
 ///
 /// Returns whether the fix was applied. Idempotent: after the fix the two differ.
-pub fn fix_left_shapedirs(left: &mut HandModel, right: &HandModel) -> bool {
+pub(crate) fn fix_left_shapedirs(left: &mut HandModel, right: &HandModel) -> bool {
     if left.shape_dirs.len() != right.shape_dirs.len() {
         return false;
     }
@@ -293,7 +293,7 @@ pub fn convert_mano_dir(
 }
 
 /// Loads a hand model from a `.pkl` (MANO as distributed) or `.safetensors` (converted) file.
-pub fn load_hand_model(path: &Path, side: Side) -> Result<HandModel, MeshError> {
+pub(crate) fn load_hand_model(path: &Path, side: Side) -> Result<HandModel, MeshError> {
     match path.extension().and_then(|e| e.to_str()) {
         Some("safetensors") => load_safetensors(path),
         _ => load_mano_pkl(path, side),
@@ -352,7 +352,7 @@ fn file_name(p: &Path) -> String {
 }
 
 /// Format tag written into the metadata of this project's model files.
-pub const SAFETENSORS_FORMAT: &str = "bitt-hand-model/1";
+pub(crate) const SAFETENSORS_FORMAT: &str = "bitt-hand-model/1";
 
 /// Serializes a hand model to safetensors bytes (f64 arrays, u32 indices, i64 parents).
 pub fn to_safetensors(model: &HandModel) -> Result<Vec<u8>, MeshError> {

@@ -148,7 +148,7 @@ pub struct HandModel {
 }
 
 /// MANO's fingertip vertices (thumb, index, middle, ring, pinky), the common convention.
-pub const MANO_FINGERTIPS: [u32; 5] = [745, 317, 444, 556, 673];
+pub(crate) const MANO_FINGERTIPS: [u32; 5] = [745, 317, 444, 556, 673];
 
 /// Order of the 21 output joints, as indices into `[16 skeleton joints, 5 fingertips]`:
 /// wrist, then thumb, index, middle, ring, pinky, each from the knuckle to the tip

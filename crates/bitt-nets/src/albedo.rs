@@ -67,7 +67,7 @@ enum LevelKind {
 
 /// One U-Net level (see the module docs).
 #[derive(Module, Debug)]
-pub struct UnetLevel {
+pub(crate) struct UnetLevel {
     down: Conv2d,
     down_norm: Option<InstanceNorm>,
     up: Conv2d,
@@ -105,7 +105,7 @@ impl AlbedoNetConfig {
     }
 
     /// The image side must be a multiple of this (one halving per level).
-    pub fn size_multiple(&self) -> usize {
+    pub(crate) fn size_multiple(&self) -> usize {
         1 << self.num_downs
     }
 

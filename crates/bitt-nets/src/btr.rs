@@ -69,7 +69,7 @@ pub struct BtrConfig {
 
 /// One 1-D ResNet block: two (conv k=3, group norm, SiLU) and a residual connection.
 #[derive(Module, Debug)]
-pub struct ResBlock1d {
+pub(crate) struct ResBlock1d {
     conv1: TexelConv,
     norm1: GroupNorm,
     conv2: TexelConv,
@@ -166,7 +166,7 @@ fn conv_norm_silu(conv: &TexelConv, norm: &GroupNorm, x: Tensor<3>) -> Tensor<3>
 
 /// Two ResNet blocks of one encoder or decoder level.
 #[derive(Module, Debug)]
-pub struct BtrLevel {
+pub(crate) struct BtrLevel {
     block1: ResBlock1d,
     block2: ResBlock1d,
 }
@@ -224,7 +224,7 @@ impl BtrConfig {
     }
 
     /// The smallest texel count the network accepts: every level keeps at least one texel.
-    pub fn min_texels(&self) -> usize {
+    pub(crate) fn min_texels(&self) -> usize {
         1 << (self.channels.len() - 1)
     }
 

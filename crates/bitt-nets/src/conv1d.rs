@@ -122,7 +122,7 @@ impl TexelConv {
     /// # Shapes
     /// - `x`: `[B, C_in, T]`
     /// - output: `[B, C_out, T]`
-    pub fn forward_without_bias(&self, x: Tensor<3>) -> Tensor<3> {
+    pub(crate) fn forward_without_bias(&self, x: Tensor<3>) -> Tensor<3> {
         let weight = self.weight.val();
         let [c_out, c_in, k] = weight.dims();
         let t = x.dims()[2];

@@ -79,9 +79,9 @@ pub struct LightParams {
 }
 
 /// Colors are `0.6 + 0.4 x` for `x` in `[-1, 1]`: the range `[0.2, 1]` of supplement D.
-pub const LIGHT_COLOR_SCALE: f64 = 0.4;
+pub(crate) const LIGHT_COLOR_SCALE: f64 = 0.4;
 /// See [`LIGHT_COLOR_SCALE`].
-pub const LIGHT_COLOR_OFFSET: f64 = 0.6;
+pub(crate) const LIGHT_COLOR_OFFSET: f64 = 0.6;
 
 impl LightParams {
     /// The one mapping from the light network's 12 outputs to light values.

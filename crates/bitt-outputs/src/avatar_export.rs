@@ -27,19 +27,19 @@ use crate::OutputError;
 /// Names of the avatar files in a run folder.
 pub mod files {
     /// The rigged avatar.
-    pub const RIGGED: &str = "avatar.glb";
+    pub(crate) const RIGGED: &str = "avatar.glb";
     /// The posed meshes without a rig.
     pub const STATIC: &str = "avatar_static.glb";
 }
 
 /// Seconds between the poses of the avatar's clip.
-pub const SECONDS_PER_POSE: f64 = 1.0;
+pub(crate) const SECONDS_PER_POSE: f64 = 1.0;
 
 /// The name of the avatar's clip.
-pub const CLIP_NAME: &str = "novel_poses";
+pub(crate) const CLIP_NAME: &str = "novel_poses";
 
 /// The glTF material of a Phong `material` (see the module docs).
-pub fn pbr_material(material: &Material) -> PbrMaterial {
+pub(crate) fn pbr_material(material: &Material) -> PbrMaterial {
     let specular = material.specular.iter().copied().fold(0.0f32, f32::max);
     let roughness = if specular <= 0.0 {
         1.0
@@ -221,15 +221,15 @@ pub mod xr_files {
     /// Which bone is which joint, how each was placed, the skinning rule and the vertex error.
     pub const JOINTS: &str = "joints.json";
     /// Joint poses of the run's poses, as a tracker reports them (for the page and for tests).
-    pub const PLAYBACK: &str = "playback.json";
+    pub(crate) const PLAYBACK: &str = "playback.json";
     /// The page that shows the two files driven (WebXR only).
     pub const PAGE: &str = "xr.html";
     /// The `format` of [`JOINTS`].
-    pub const JOINTS_FORMAT: &str = "bitt-xr-joints";
+    pub(crate) const JOINTS_FORMAT: &str = "bitt-xr-joints";
 }
 
 /// A file of a folder to write: its name and its bytes.
-pub type NamedFile = (String, Vec<u8>);
+pub(crate) type NamedFile = (String, Vec<u8>);
 
 /// One pose the XR files are played in: its name, which novel pose it is (`None`: the
 /// training pose) and the hands with the camera that sees them.
@@ -454,7 +454,7 @@ impl XrAvatar<'_> {
 }
 
 /// Whether `dir` is an earlier XR export (its `joints.json` says so).
-pub fn is_xr_export(dir: &Path) -> bool {
+pub(crate) fn is_xr_export(dir: &Path) -> bool {
     std::fs::read(dir.join(xr_files::JOINTS))
         .ok()
         .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())

@@ -33,7 +33,7 @@ pub fn rgb_image(values: &[f32], h: usize, w: usize) -> Result<image::RgbImage, 
 }
 
 /// The first 8 bytes of every PNG file.
-pub const PNG_SIGNATURE: &[u8] = b"\x89PNG\r\n\x1a\n";
+pub(crate) const PNG_SIGNATURE: &[u8] = b"\x89PNG\r\n\x1a\n";
 
 /// Writes `[3, H, W]` values as a PNG.
 pub fn write_png(path: &Path, values: &[f32], h: usize, w: usize) -> Result<(), OutputError> {

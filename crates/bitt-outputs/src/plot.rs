@@ -29,7 +29,7 @@ use bitt_train::losses::LossTerms;
 
 /// The plot's size in pixels. At most 768 wide: the report shows images at up to 48em
 /// (768 px) with nearest-neighbour scaling, which would break the text of a wider one.
-pub const PLOT_SIZE: (u32, u32) = (760, 480);
+pub(crate) const PLOT_SIZE: (u32, u32) = (760, 480);
 
 /// Height of the legend under the chart: [`LEGEND_COLUMNS`] entries a row, rows of
 /// [`LEGEND_ROW`] pixels.
@@ -242,7 +242,7 @@ pub fn write_loss_plot(
 /// The iterations after which the scheduled learning rate drops (the rate of iteration `i`,
 /// counted from 0, is lower than that of `i - 1`): with the paper's schedule (halved every
 /// 200) and 700 iterations, `[200, 400, 600]`. Steps stop at the rate's floor.
-pub fn learning_rate_steps(schedule: &OptimConfig, iterations: usize) -> Vec<usize> {
+pub(crate) fn learning_rate_steps(schedule: &OptimConfig, iterations: usize) -> Vec<usize> {
     if schedule.decay_step == 0 {
         return Vec::new();
     }
@@ -326,7 +326,7 @@ fn scientific(v: f64) -> String {
 
 /// The values a curve draws; others are skipped (the axis range is whole decades around
 /// the values drawn, and must stay finite and positive).
-pub const DRAWN_RANGE: std::ops::RangeInclusive<f64> = 1e-300..=1e300;
+pub(crate) const DRAWN_RANGE: std::ops::RangeInclusive<f64> = 1e-300..=1e300;
 
 /// One curve: its legend label, colour, width, and its drawable runs of `(iteration, value)`
 /// (a value outside [`DRAWN_RANGE`], NaN included, ends a run).
@@ -384,7 +384,7 @@ fn draw_error(e: impl std::fmt::Display) -> OutputError {
 ///
 /// # Errors
 /// Only if the embedded font cannot be read or plotters fails to draw.
-pub fn loss_plot_image(
+pub(crate) fn loss_plot_image(
     history: &[LossTerms],
     schedule: &OptimConfig,
 ) -> Result<image::RgbImage, OutputError> {

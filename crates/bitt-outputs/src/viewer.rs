@@ -38,24 +38,24 @@ use crate::outputs::base64;
 use bitt_stdx::FileErrorExt;
 
 /// The vendored three.js release (`crates/bitt-outputs/assets/vendor/three/README.md`).
-pub const THREE_VERSION: &str = "0.187.0";
+pub(crate) const THREE_VERSION: &str = "0.187.0";
 
 /// The ids of the viewer's elements: canvas, controls, status.
 pub mod ids {
     /// The WebGL canvas.
-    pub const CANVAS: &str = "bitt-canvas";
+    pub(crate) const CANVAS: &str = "bitt-canvas";
     /// Hands shown: `both`, `left_hand`, `right_hand`.
-    pub const HANDS: &str = "bitt-hands";
+    pub(crate) const HANDS: &str = "bitt-hands";
     /// Light azimuth slider (degrees).
-    pub const LIGHT_AZIMUTH: &str = "bitt-light-azimuth";
+    pub(crate) const LIGHT_AZIMUTH: &str = "bitt-light-azimuth";
     /// Light elevation slider (degrees).
-    pub const LIGHT_ELEVATION: &str = "bitt-light-elevation";
+    pub(crate) const LIGHT_ELEVATION: &str = "bitt-light-elevation";
     /// Puts the light back at the estimated location.
-    pub const LIGHT_RESET: &str = "bitt-light-reset";
+    pub(crate) const LIGHT_RESET: &str = "bitt-light-reset";
     /// Play / pause of the animation clip (hidden without one).
-    pub const PLAY: &str = "bitt-play";
+    pub(crate) const PLAY: &str = "bitt-play";
     /// JSON summary once the first frame is drawn (`data-state` `ready` or `error`).
-    pub const STATUS: &str = "bitt-viewer-status";
+    pub(crate) const STATUS: &str = "bitt-viewer-status";
     /// Every id above.
     pub const ALL: [&str; 7] = [
         CANVAS,
@@ -142,7 +142,7 @@ pub(crate) fn import_map<'a>(modules: impl IntoIterator<Item = &'a Module>) -> S
 /// The viewer: a `<section id="bitt-viewer">` with its style, controls, canvas, the GLB
 /// (base64), the light and the scripts, for `glb` (a run's `avatar.glb`) lit by `light`
 /// (training camera frame, OpenCV axes, as `light.json`).
-pub fn viewer_html(glb: &[u8], light: &LightValues) -> String {
+pub(crate) fn viewer_html(glb: &[u8], light: &LightValues) -> String {
     let finite = |v: [f32; 3]| v.map(|x| if x.is_finite() { x } else { 0.0 });
     let light_json = serde_json::json!({
         "ambient": finite(light.ambient),

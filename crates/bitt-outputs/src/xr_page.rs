@@ -44,27 +44,27 @@ use crate::viewer::{MODULES, Module, THREE_VERSION, import_map};
 /// The ids of the page's elements.
 pub mod ids {
     /// The WebGL canvas.
-    pub const CANVAS: &str = "bitt-xr-canvas";
+    pub(crate) const CANVAS: &str = "bitt-xr-canvas";
     /// Play / pause of the playback.
-    pub const PLAY: &str = "bitt-xr-play";
+    pub(crate) const PLAY: &str = "bitt-xr-play";
     /// The frame shown (a `<select>`).
     pub const FRAME: &str = "bitt-xr-frame";
     /// Back to the frame's camera view.
-    pub const RESET_VIEW: &str = "bitt-xr-reset-view";
+    pub(crate) const RESET_VIEW: &str = "bitt-xr-reset-view";
     /// Starts an `immersive-vr` session (hidden unless supported).
-    pub const ENTER_VR: &str = "bitt-xr-enter-vr";
+    pub(crate) const ENTER_VR: &str = "bitt-xr-enter-vr";
     /// Starts an `immersive-ar` session (hidden unless supported).
-    pub const ENTER_AR: &str = "bitt-xr-enter-ar";
+    pub(crate) const ENTER_AR: &str = "bitt-xr-enter-ar";
     /// Error message (hidden unless something failed).
-    pub const ERROR: &str = "bitt-xr-error";
+    pub(crate) const ERROR: &str = "bitt-xr-error";
     /// `data-state` `loading` / `ready` / `error`, `data-warnings`, JSON summary once ready.
-    pub const STATUS: &str = "bitt-xr-status";
+    pub(crate) const STATUS: &str = "bitt-xr-status";
     /// The playback JSON.
-    pub const PLAYBACK: &str = "bitt-xr-playback";
+    pub(crate) const PLAYBACK: &str = "bitt-xr-playback";
     /// `left.glb`, base64.
-    pub const LEFT_GLB: &str = "bitt-xr-left-glb";
+    pub(crate) const LEFT_GLB: &str = "bitt-xr-left-glb";
     /// `right.glb`, base64.
-    pub const RIGHT_GLB: &str = "bitt-xr-right-glb";
+    pub(crate) const RIGHT_GLB: &str = "bitt-xr-right-glb";
     /// Every id above.
     pub const ALL: [&str; 11] = [
         CANVAS, PLAY, FRAME, RESET_VIEW, ENTER_VR, ENTER_AR, ERROR, STATUS, PLAYBACK, LEFT_GLB,
@@ -93,7 +93,7 @@ const XR_HAND_MESH_MODEL: Module = Module {
 /// avatars) driven by `playback_json` (the `bitt-xr-playback` JSON; see the module docs). The
 /// JSON is embedded as it is, with every `<` written `\u003c` so that no string in it can end
 /// the script element.
-pub fn xr_html(left_glb: &[u8], right_glb: &[u8], playback_json: &str) -> String {
+pub(crate) fn xr_html(left_glb: &[u8], right_glb: &[u8], playback_json: &str) -> String {
     let mut html = String::with_capacity((left_glb.len() + right_glb.len()) * 4 / 3 + 1_300_000);
     html.push_str(&format!(
         "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\

@@ -69,10 +69,10 @@ pub fn u32_bytes(values: impl IntoIterator<Item = u32>) -> Vec<u8> {
 }
 
 /// The metadata entry holding each tensor's checksum.
-pub const CHECKSUMS: &str = "checksums";
+pub(crate) const CHECKSUMS: &str = "checksums";
 
 /// The metadata entry holding the checksum of the other metadata entries.
-pub const METADATA_CHECKSUM: &str = "metadata_checksum";
+pub(crate) const METADATA_CHECKSUM: &str = "metadata_checksum";
 
 /// The checksum of some bytes: XXH3-64 as 16 hex digits.
 pub fn checksum(bytes: &[u8]) -> String {

@@ -96,7 +96,7 @@ fn blur(image: &[f32], size: usize, sigma: f64) -> Vec<f32> {
 /// nearest `k / 255`. The generator's ground-truth images are 8-bit, as the rendered
 /// datasets of the paper (saved as PNG) and every photograph are; that also lets a run keep
 /// them as bytes (`bitt_stdx::st::unit_entry`).
-pub fn to_8bit(image: &[f32]) -> Vec<f32> {
+pub(crate) fn to_8bit(image: &[f32]) -> Vec<f32> {
     image
         .iter()
         .map(|&v| st::from_unit_byte(st::unit_byte(v)))

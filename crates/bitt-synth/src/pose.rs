@@ -36,7 +36,7 @@ use crate::SynthError;
 
 /// Largest overlap (metres) of two capsules of different hands that still counts as contact
 /// (skin gives a little; the capsules are slightly slimmer than the surface too).
-pub const CONTACT_TOLERANCE: f64 = 0.002;
+pub(crate) const CONTACT_TOLERANCE: f64 = 0.002;
 
 /// The interacting-pose families.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]

@@ -64,7 +64,7 @@ impl TexelStats {
 ///
 /// # Errors
 /// Layouts that do not belong to the models, rendering errors.
-pub fn view_visibility(
+pub(crate) fn view_visibility(
     models: &HandPair,
     layouts: &[TextureLayout; 2],
     view: &RenderedView,

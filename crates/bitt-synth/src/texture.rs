@@ -146,7 +146,7 @@ const REDNESS_PATCHES: usize = 8;
 /// brightness ±8-20 %) and [`REDNESS_PATCHES`] redness patches (radius 6-14 mm, strength
 /// 8-25 %), centred at random texels (`points`: rest right-hand texel points, roughly uniform
 /// over the surface).
-pub fn draw_appearance(points: &[DVec3], rng: &mut SplitMix64) -> Vec<AppearancePatch> {
+pub(crate) fn draw_appearance(points: &[DVec3], rng: &mut SplitMix64) -> Vec<AppearancePatch> {
     let pick = |rng: &mut SplitMix64| points[(rng.next_u64() % points.len() as u64) as usize];
     let mut out = Vec::with_capacity(TONE_PATCHES + REDNESS_PATCHES);
     for _ in 0..TONE_PATCHES {
@@ -234,7 +234,7 @@ impl Landmarks {
 
 /// Draws the one-sided details of a scene: one mole, one scar and one tan line, each on a
 /// random hand, placed among `points` (rest right-hand texel points).
-pub fn draw_details(
+pub(crate) fn draw_details(
     models: &HandPair,
     points: &[DVec3],
     rng: &mut SplitMix64,
@@ -423,7 +423,7 @@ pub fn texel_points(
 
 /// The ground-truth textures `[left, right]` (compact `[3, T]` each) of an identity with its
 /// personal appearance (both hands) and one-sided details.
-pub fn identity_textures(
+pub(crate) fn identity_textures(
     models: &HandPair,
     layouts: &[TextureLayout; 2],
     points: &[DVec3],

@@ -95,7 +95,7 @@ pub fn framed_camera(
 
 /// A training-camera candidate: mostly from the front half, from a little below to well above, as
 /// most InterHand2.6M cameras see the hands.
-pub fn train_placement(rng: &mut SplitMix64) -> CameraPlacement {
+pub(crate) fn train_placement(rng: &mut SplitMix64) -> CameraPlacement {
     CameraPlacement {
         azimuth: rng.range(-1.75, 1.75),
         elevation: rng.range(-0.5, 1.0),
@@ -107,7 +107,7 @@ pub fn train_placement(rng: &mut SplitMix64) -> CameraPlacement {
 
 /// `n` novel cameras spread around the hands (evenly spaced azimuths from a random start,
 /// jittered; elevations from below to above).
-pub fn novel_placements(n: usize, rng: &mut SplitMix64) -> Vec<CameraPlacement> {
+pub(crate) fn novel_placements(n: usize, rng: &mut SplitMix64) -> Vec<CameraPlacement> {
     let start = rng.range(0.0, std::f64::consts::TAU);
     (0..n)
         .map(|k| CameraPlacement {
@@ -166,7 +166,7 @@ impl StudioLight {
     }
 
     /// The light as the renderer takes it for `camera`: location in that camera's frame.
-    pub fn in_camera(&self, camera: &PinholeCamera) -> LightValues {
+    pub(crate) fn in_camera(&self, camera: &PinholeCamera) -> LightValues {
         let p = camera.world_to_camera(DVec3::from_array(self.location));
         LightValues {
             ambient: self.ambient,

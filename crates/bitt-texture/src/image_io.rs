@@ -19,7 +19,7 @@ use crate::layout::TextureLayout;
 use crate::st;
 
 /// The `format` metadata of a compact texture safetensors file.
-pub const COMPACT_TEXTURE_FORMAT: &str = "bitt-compact-texture";
+pub(crate) const COMPACT_TEXTURE_FORMAT: &str = "bitt-compact-texture";
 
 /// A planar RGB image: `data` is `[3, H, W]` (channel-major, row 0 = top) in `[0, 1]`.
 #[derive(Debug, Clone, PartialEq)]

@@ -50,7 +50,7 @@ pub struct TextureLayout {
 /// UV coordinates of the centre of texel `(row, col)` in a `width x height` texture
 /// (`align_corners = true`: `u = col / (W - 1)`, `v = 1 - row / (H - 1)`; a size of 1
 /// maps to the middle, 0.5).
-pub fn texel_uv(row: usize, col: usize, width: usize, height: usize) -> DVec2 {
+pub(crate) fn texel_uv(row: usize, col: usize, width: usize, height: usize) -> DVec2 {
     let axis = |i: usize, n: usize| {
         if n > 1 {
             i as f64 / (n - 1) as f64
@@ -250,7 +250,7 @@ impl TextureLayout {
 
     /// A layout from texels and their faces and barycentrics (as [`Self::from_uv`] makes
     /// them); used when loading a stored layout.
-    pub fn from_texel_faces(
+    pub(crate) fn from_texel_faces(
         width: usize,
         height: usize,
         texels: Vec<(u32, u32)>,
@@ -332,7 +332,7 @@ impl TextureLayout {
 
     /// A 64-bit FNV-1a fingerprint of the size and the texel list, to check that a stored
     /// texture belongs to this layout.
-    pub fn fingerprint(&self) -> u64 {
+    pub(crate) fn fingerprint(&self) -> u64 {
         let mut h: u64 = 0xcbf2_9ce4_8422_2325;
         let mut eat = |x: u64| {
             for b in x.to_le_bytes() {

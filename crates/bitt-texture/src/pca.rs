@@ -23,7 +23,7 @@ use crate::layout::TextureLayout;
 use crate::st;
 
 /// The `format` metadata of a texture PCA safetensors file.
-pub const PCA_FORMAT: &str = "bitt-texture-pca";
+pub(crate) const PCA_FORMAT: &str = "bitt-texture-pca";
 
 /// Sweeps per singular value allowed to `burn::linalg::svd` in [`TexturePca::fit`].
 const SVD_SWEEPS: usize = 100;
@@ -326,7 +326,7 @@ impl TexturePca {
     ///
     /// Fails on a mask of the wrong length, a negative or non-finite ridge, an empty mask,
     /// or singular normal equations (use `ridge > 0` then).
-    pub fn projector<'a>(
+    pub(crate) fn projector<'a>(
         &'a self,
         mask: Option<&'a [bool]>,
         ridge: f32,
@@ -476,7 +476,7 @@ impl TexturePca {
     ///
     /// # Errors and panics
     /// As [`Self::fit`].
-    pub fn fit_with_progress(
+    pub(crate) fn fit_with_progress(
         layout: TextureLayout,
         samples: &[Vec<f32>],
         num_components: usize,

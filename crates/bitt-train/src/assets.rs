@@ -339,7 +339,7 @@ impl ViewGeometry {
     /// The image of [`ViewGeometry::render`] alone, `[3, H, W]` (nothing else is copied): the
     /// training step's render, on the dense geometry where the CubeCL rasterizer runs (no
     /// host readback), the covered one elsewhere.
-    pub fn render_image(
+    pub(crate) fn render_image(
         &self,
         assets: &HandAssets,
         gather: &LayoutGather,

@@ -20,7 +20,7 @@ use crate::losses::LossTerms;
 use bitt_stdx::FileErrorExt;
 
 /// The `format` metadata of a checkpoint file.
-pub const CHECKPOINT_FORMAT: &str = "bitt-checkpoint-2";
+pub(crate) const CHECKPOINT_FORMAT: &str = "bitt-checkpoint-2";
 
 /// The format before checksums (read, never written).
 const CHECKPOINT_FORMAT_1: &str = "bitt-checkpoint-1";
@@ -29,7 +29,7 @@ const CHECKPOINT_FORMAT_1: &str = "bitt-checkpoint-1";
 const HISTORY_COLUMNS: usize = LossTerms::COUNT + 1;
 
 /// One flattened tensor: shape and values.
-pub type HostTensor = (Vec<usize>, Vec<f32>);
+pub(crate) type HostTensor = (Vec<usize>, Vec<f32>);
 
 /// Everything needed to continue a run exactly.
 #[derive(Debug, Clone, PartialEq)]

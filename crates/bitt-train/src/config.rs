@@ -9,10 +9,10 @@ use bitt_stdx::FileErrorExt;
 
 /// The largest learning rate a configuration may ask for (Adam steps of this size already
 /// destroy the networks; the paper's is 1e-3).
-pub const MAX_LEARNING_RATE: f64 = 1.0;
+pub(crate) const MAX_LEARNING_RATE: f64 = 1.0;
 
 /// The largest loss weight a configuration may give a term (the paper's are at most 1).
-pub const MAX_LOSS_WEIGHT: f64 = 1e3;
+pub(crate) const MAX_LOSS_WEIGHT: f64 = 1e3;
 
 /// The interval a configuration number must lie in, for [`check_field`]: every
 /// configuration of the project (training, refinement, keypoint fit) checks its numbers

@@ -51,7 +51,7 @@ impl LossTerms {
 
     /// From a row of [`LossTerms::values`]: the terms in [`LossTerms::NAMES`] order, then the
     /// total (`COUNT + 1` values).
-    pub fn from_row(row: &[f64; Self::COUNT + 1]) -> Self {
+    pub(crate) fn from_row(row: &[f64; Self::COUNT + 1]) -> Self {
         let (terms, total) = row.split_at(Self::COUNT);
         Self::from_values(terms, total[0])
     }

@@ -13,7 +13,7 @@ use crate::config::{Bounds, OptimConfig};
 /// The largest Adam step a keypoint fit or a refinement may start from: one radian of
 /// rotation (or one translation or shape unit) per iteration. The defaults are 0.02 (fit)
 /// and 0.01 (refinement); 1e30 used to surface as a non-finite loss naming neither.
-pub const MAX_LEARNING_RATE: f64 = 1.0;
+pub(crate) const MAX_LEARNING_RATE: f64 = 1.0;
 
 /// The learning rates a keypoint fit or a refinement may ask for: `(0, MAX_LEARNING_RATE]`.
 pub const STEP_BOUNDS: Bounds = Bounds::new(0.0, true, MAX_LEARNING_RATE, false).because(

@@ -230,7 +230,7 @@ pub fn point_light(light: &LightParams) -> PointLight {
 /// at half the brightness of white light; light 2 as light 1 with the estimated light's
 /// colour. "Below" is `+y` of the camera frame (image rows grow downwards), 1 m away, and
 /// the diffuse and specular parts are the reference's relighting values (0.3, 0.2).
-pub fn consistency_lights(estimated: &PointLight) -> [PointLight; 2] {
+pub(crate) fn consistency_lights(estimated: &PointLight) -> [PointLight; 2] {
     let device = estimated.ambient.device();
     let c = |v: [f32; 3]| Tensor::<1>::from_data(TensorData::new(v.to_vec(), [3]), &device);
     let below = c([0.0, 1.0, 0.0]);

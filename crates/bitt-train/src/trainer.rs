@@ -30,7 +30,7 @@ pub const MAX_NON_FINITE: usize = 8;
 pub static NETS_INIT: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 /// The factor on the learning rate at every recovery from a non-finite loss.
-pub const RECOVERY_LR_FACTOR: f64 = 0.5;
+pub(crate) const RECOVERY_LR_FACTOR: f64 = 0.5;
 
 /// A state the trainer can go back to. A checkpoint is written right after a step, from
 /// weights no forward pass has tried yet; it is `verified` once a step from it gave a finite
@@ -540,7 +540,7 @@ impl Trainer {
 }
 
 /// PSNR (dB) of images in `[0, 1]` from their mean squared error.
-pub fn psnr_from_mse(mse: f64) -> f64 {
+pub(crate) fn psnr_from_mse(mse: f64) -> f64 {
     if mse <= 0.0 {
         f64::INFINITY
     } else {

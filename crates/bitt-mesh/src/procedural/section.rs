@@ -143,7 +143,7 @@ impl LobeBox {
     }
 
     /// The back-side outline, from the radial end to the ulnar end.
-    pub fn dorsal_path(&self) -> Vec<DVec2> {
+    pub(crate) fn dorsal_path(&self) -> Vec<DVec2> {
         let c = self.corner;
         let (x0, x1) = (-self.radial, self.ulnar);
         let a = if self.outer[0] { x0 + c } else { x0 };
@@ -168,7 +168,7 @@ impl LobeBox {
     }
 
     /// The palm-side outline, from the ulnar end to the radial end.
-    pub fn palmar_path(&self) -> Vec<DVec2> {
+    pub(crate) fn palmar_path(&self) -> Vec<DVec2> {
         let c = self.corner;
         let (x0, x1) = (-self.radial, self.ulnar);
         let a = if self.outer[0] { x0 + c } else { x0 };

@@ -70,7 +70,7 @@ impl Chain {
     }
 
     /// Unit direction of segment `k` (0: proximal, 2: distal).
-    pub fn segment_dir(&self, k: usize) -> DVec3 {
+    pub(crate) fn segment_dir(&self, k: usize) -> DVec3 {
         (self.points[k + 1] - self.points[k]).normalize()
     }
 
@@ -108,7 +108,7 @@ impl Chain {
 
     /// Rest-pose flexion axis of joint `k`: a positive rotation about it curls the digit towards
     /// the palm (the pad side).
-    pub fn flexion_axis(&self, k: usize) -> DVec3 {
+    pub(crate) fn flexion_axis(&self, k: usize) -> DVec3 {
         let (t, e1, _) = nail_frame(self.segment_dir(k), self.pronation);
         e1.cross(t)
     }

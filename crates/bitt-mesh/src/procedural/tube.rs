@@ -94,7 +94,7 @@ pub(super) struct TubeFace {
 
 impl Tube {
     /// Number of slots per ring.
-    pub fn ring_len(&self) -> usize {
+    pub(crate) fn ring_len(&self) -> usize {
         self.rows
             .iter()
             .find_map(|r| match r {
@@ -105,14 +105,14 @@ impl Tube {
     }
 
     /// 0 if ring edge `k -> k + 1` lies in the palm-side half, else 1.
-    pub fn half_of_edge(&self, k: usize) -> usize {
+    pub(crate) fn half_of_edge(&self, k: usize) -> usize {
         let n = self.ring_len();
         let (first, len) = self.palmar;
         usize::from((k + n - first) % n >= len)
     }
 
     /// The slots of half `h` in ring order (both seam slots included).
-    pub fn half_slots(&self, h: usize) -> Vec<usize> {
+    pub(crate) fn half_slots(&self, h: usize) -> Vec<usize> {
         let n = self.ring_len();
         let (first, len) = self.palmar;
         let (start, count) = if h == 0 {

@@ -41,7 +41,7 @@ const MIN_TILE: usize = 128;
 impl Conv2dDims {
     /// The output height and width, `None` when the kernel does not fit the padded input or
     /// a size or stride is zero.
-    pub fn out_size(&self) -> Option<[usize; 2]> {
+    pub(crate) fn out_size(&self) -> Option<[usize; 2]> {
         let mut out = [0; 2];
         for (a, o) in out.iter_mut().enumerate() {
             let padded = self.size[a] + 2 * self.padding[a];

@@ -81,7 +81,7 @@ fn check_hand(h: &ExportHand) -> Result<(), OutputError> {
 /// The OBJ text of `hands` (one `o` object each, in the given order), with `vt` UVs where a
 /// hand has a layout. `mtllib` names a material library to reference (one material per
 /// hand, named after it), as written by [`mtl_text`].
-pub fn obj_text(hands: &[ExportHand], mtllib: Option<&str>) -> Result<String, OutputError> {
+pub(crate) fn obj_text(hands: &[ExportHand], mtllib: Option<&str>) -> Result<String, OutputError> {
     use std::fmt::Write as _;
     let mut s = format!("{WRITTEN_BY}\n");
     if let Some(m) = mtllib {
@@ -135,7 +135,7 @@ pub fn obj_text(hands: &[ExportHand], mtllib: Option<&str>) -> Result<String, Ou
 }
 
 /// A material library giving each hand (by name) its texture file, if it has one.
-pub fn mtl_text(materials: &[(&str, Option<&str>)]) -> String {
+pub(crate) fn mtl_text(materials: &[(&str, Option<&str>)]) -> String {
     let mut s = format!("{WRITTEN_BY}\n");
     for (name, texture) in materials {
         s.push_str(&format!(
@@ -489,7 +489,7 @@ pub fn glb_bytes(hands: &[ExportHand]) -> Result<Vec<u8>, OutputError> {
 }
 
 /// [`glb_bytes`] with the hands' material.
-pub fn glb_bytes_with_material(
+pub(crate) fn glb_bytes_with_material(
     hands: &[ExportHand],
     pbr: &PbrMaterial,
 ) -> Result<Vec<u8>, OutputError> {
@@ -559,7 +559,7 @@ pub(crate) fn assemble_glb(
 }
 
 /// Writes `hands` as a `.glb` file (atomically).
-pub fn write_glb(path: &Path, hands: &[ExportHand]) -> Result<(), OutputError> {
+pub(crate) fn write_glb(path: &Path, hands: &[ExportHand]) -> Result<(), OutputError> {
     Ok(bitt_stdx::write_atomically(path, &glb_bytes(hands)?)?)
 }
 

@@ -158,7 +158,7 @@ impl XrConvention {
 
     /// The joints the runtime reports, in its order: WebXR's names, or OpenXR's
     /// `XR_HAND_JOINT_*_EXT` enumerants.
-    pub fn runtime_names(self) -> Vec<String> {
+    pub(crate) fn runtime_names(self) -> Vec<String> {
         match self {
             XrConvention::WebXr => WEBXR_JOINTS.iter().map(|s| s.to_string()).collect(),
             XrConvention::OpenXr => OPENXR_JOINTS
@@ -169,7 +169,7 @@ impl XrConvention {
     }
 
     /// The bones' names in the file, in the runtime's order.
-    pub fn bone_names(self, side: Side) -> Vec<String> {
+    pub(crate) fn bone_names(self, side: Side) -> Vec<String> {
         match self {
             XrConvention::WebXr => WEBXR_JOINTS.iter().map(|s| s.to_string()).collect(),
             XrConvention::OpenXr => {
@@ -428,7 +428,11 @@ impl XrSkeleton {
     /// model posed by `posed_joint_transforms` (the forward pass's world transforms of the 16
     /// model joints, [`crate::PosedHand::joint_transforms`], with this skeleton's shape), in
     /// the tracking space `world` (a rigid map from the forward pass's frame).
-    pub fn tracked_poses(&self, posed_joint_transforms: &[DMat4], world: DMat4) -> Vec<DMat4> {
+    pub(crate) fn tracked_poses(
+        &self,
+        posed_joint_transforms: &[DMat4],
+        world: DMat4,
+    ) -> Vec<DMat4> {
         self.joints
             .iter()
             .map(|x| {
@@ -442,7 +446,7 @@ impl XrSkeleton {
     /// The model's own linear blend skinning without pose correctives (its weights, not the
     /// file's), of this skeleton's rest mesh by the forward pass's `joint_transforms`, in
     /// `world`: what [`XrSkeleton::skin`] is held against.
-    pub fn blend_skinning(
+    pub(crate) fn blend_skinning(
         &self,
         model: &HandModel,
         joint_transforms: &[DMat4],

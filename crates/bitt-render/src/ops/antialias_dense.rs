@@ -94,7 +94,7 @@ impl AntialiasPlan {
     ///
     /// # Errors
     /// When `clip` does not match `topology`, or the raster's tensors disagree in size.
-    pub fn from_dense(
+    pub(crate) fn from_dense(
         dense: &DenseRaster,
         clip: Tensor<2>,
         topology: &Topology,

@@ -66,9 +66,9 @@ pub struct Topology {
 
 impl Topology {
     /// Marks an edge with no face on the other side.
-    pub const BOUNDARY: i32 = -1;
+    pub(crate) const BOUNDARY: i32 = -1;
     /// Marks an edge shared by more than two faces.
-    pub const NON_MANIFOLD: i32 = -2;
+    pub(crate) const NON_MANIFOLD: i32 = -2;
 
     /// Builds the topology of `faces` over `num_vertices` vertices.
     ///
@@ -132,7 +132,7 @@ impl Topology {
     }
 
     /// Number of faces.
-    pub fn num_faces(&self) -> usize {
+    pub(crate) fn num_faces(&self) -> usize {
         self.faces.len()
     }
 
@@ -143,7 +143,7 @@ impl Topology {
 
     /// Per face, per edge `k` (vertices `k` and `k + 1 mod 3`), the face across it or
     /// [`Topology::BOUNDARY`] / [`Topology::NON_MANIFOLD`].
-    pub fn neighbors(&self) -> &[[i32; 3]] {
+    pub(crate) fn neighbors(&self) -> &[[i32; 3]] {
         &self.neighbors
     }
 }

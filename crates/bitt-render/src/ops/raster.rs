@@ -56,7 +56,7 @@ impl Raster {
     }
 
     /// Face id of each covered pixel.
-    pub fn covered_faces(&self) -> Vec<u32> {
+    pub(crate) fn covered_faces(&self) -> Vec<u32> {
         self.covered
             .iter()
             .map(|&p| self.fragments.face[p as usize] as u32)
@@ -121,7 +121,7 @@ impl Raster {
 
     /// Mask `[H, W]` of the pixels whose face lies in `faces` (e.g. one hand's faces of a
     /// concatenated two-hand mesh: its visible pixels after the shared depth test).
-    pub fn face_range_mask(
+    pub(crate) fn face_range_mask(
         &self,
         faces: std::ops::Range<u32>,
         device: &burn::tensor::Device,

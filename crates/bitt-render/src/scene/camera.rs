@@ -58,7 +58,7 @@ impl Camera {
 
     /// The 4x4 matrix taking homogeneous world points (row vectors, `[x y z 1] M`) to clip
     /// space; its transpose maps column vectors.
-    pub fn clip_matrix(&self, depth: DepthRange) -> DMat4 {
+    pub(crate) fn clip_matrix(&self, depth: DepthRange) -> DMat4 {
         let (w, h) = (self.width() as f64, self.height() as f64);
         let (n, f) = (depth.near, depth.far);
         match self {
@@ -100,7 +100,7 @@ impl Camera {
     ///
     /// # Shapes
     /// points `[N, 3]` -> `[N, 3]`
-    pub fn directions_to_camera(&self, points: Tensor<2>) -> Tensor<2> {
+    pub(crate) fn directions_to_camera(&self, points: Tensor<2>) -> Tensor<2> {
         let device = points.device();
         let n = points.dims()[0];
         match self {
@@ -168,7 +168,7 @@ impl Camera {
     }
 
     /// Camera-frame depth (distance along the viewing axis) of an NDC depth `z/w`.
-    pub fn view_depth(&self, ndc_z: f64, depth: DepthRange) -> f64 {
+    pub(crate) fn view_depth(&self, ndc_z: f64, depth: DepthRange) -> f64 {
         let (n, f) = (depth.near, depth.far);
         match self {
             Camera::Pinhole(_) => {

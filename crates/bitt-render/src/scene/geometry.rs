@@ -123,7 +123,7 @@ impl SceneGeometry {
     ///
     /// # Errors
     /// As [`SceneGeometry::new`].
-    pub fn with_path(
+    pub(crate) fn with_path(
         scene: &Scene,
         vertices: &[Tensor<2>],
         camera: &Camera,

@@ -111,7 +111,7 @@ impl Scene {
     }
 
     /// Number of meshes.
-    pub fn num_meshes(&self) -> usize {
+    pub(crate) fn num_meshes(&self) -> usize {
         self.face_ranges.len()
     }
 

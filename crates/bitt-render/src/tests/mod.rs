@@ -76,7 +76,7 @@ impl Camera {
 
     /// Ray through NDC `(p, q)` intersected with a camera-space triangle: barycentrics and the
     /// camera-space depth Z of the hit (no inside test), or `None` if parallel.
-    pub fn ray_bary(&self, tri: &[[f64; 3]; 3], p: f64, q: f64) -> Option<([f64; 3], f64)> {
+    pub(crate) fn ray_bary(&self, tri: &[[f64; 3]; 3], p: f64, q: f64) -> Option<([f64; 3], f64)> {
         let d = [p / self.focal, q / self.focal, 1.0];
         // Solve t d = v0 + b1 (v1 - v0) + b2 (v2 - v0) by Cramer's rule.
         let e1 = sub(tri[1], tri[0]);

@@ -203,13 +203,13 @@ impl Digit {
     }
 
     /// Length of segment `k` (0 proximal, 2 distal).
-    pub fn segment_length(&self, k: usize) -> f64 {
+    pub(crate) fn segment_length(&self, k: usize) -> f64 {
         self.s[k + 1] - self.s[k]
     }
 
     /// Coordinates of `p`: projected on the nearest segment (the first extended backwards,
     /// the last forwards).
-    pub fn locate(&self, p: DVec3) -> DigitCoord {
+    pub(crate) fn locate(&self, p: DVec3) -> DigitCoord {
         let mut best = (f64::INFINITY, 0.0, DVec3::ZERO, 0usize);
         for k in 0..3 {
             let a = self.points[k];
@@ -242,7 +242,7 @@ impl Digit {
     }
 
     /// The nail-side direction at segment `k`.
-    pub fn nail_direction(&self, k: usize) -> DVec3 {
+    pub(crate) fn nail_direction(&self, k: usize) -> DVec3 {
         let t = (self.points[k + 1] - self.points[k]).normalize_or(DVec3::NEG_X);
         nail_frame(t, self.pronation).1
     }
@@ -268,7 +268,7 @@ pub(super) struct PalmFrame {
 
 impl PalmFrame {
     /// Metric palm coordinates `(u, w)` of a point.
-    pub fn coords(&self, p: DVec3) -> DVec2 {
+    pub(crate) fn coords(&self, p: DVec3) -> DVec2 {
         let d = p - self.origin;
         DVec2::new(d.dot(self.along), d.dot(self.across))
     }
@@ -584,7 +584,7 @@ pub(super) struct Vein {
 
 impl Vein {
     /// Half-width at normalised arc length `t`.
-    pub fn width_at(&self, t: f64) -> f64 {
+    pub(crate) fn width_at(&self, t: f64) -> f64 {
         self.width[0] + (self.width[1] - self.width[0]) * t
     }
 }

@@ -85,7 +85,7 @@ impl ProceduralTextureConfig {
 
     /// The `j`-th held-out identity. Its seed is derived from a label no training identity
     /// uses (and the derivation is a bijection), so held-out people are never training ones.
-    pub fn held_out_identity(&self, j: usize) -> SkinIdentity {
+    pub(crate) fn held_out_identity(&self, j: usize) -> SkinIdentity {
         SkinIdentity::sample(derive(self.seed, (self.identities + j) as u64))
     }
 }

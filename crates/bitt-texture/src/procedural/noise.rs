@@ -41,14 +41,14 @@ impl SplitMix64 {
 }
 
 /// SplitMix64's output function: a bijective 64-bit mixer.
-pub fn mix64(mut z: u64) -> u64 {
+pub(crate) fn mix64(mut z: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^ (z >> 31)
 }
 
 /// Hash of a seed and an integer lattice point.
-pub fn hash3(seed: u64, x: i64, y: i64, z: i64) -> u64 {
+pub(crate) fn hash3(seed: u64, x: i64, y: i64, z: i64) -> u64 {
     let mut h = mix64(seed ^ 0x51_7CC1_B727_220A);
     for c in [x, y, z] {
         h = mix64(h ^ (c as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
@@ -105,7 +105,7 @@ fn fade(t: f64) -> f64 {
 }
 
 /// 3D gradient (Perlin-style) noise with unit lattice spacing, roughly in `[-1, 1]`.
-pub fn gradient_noise(seed: u64, p: DVec3) -> f64 {
+pub(crate) fn gradient_noise(seed: u64, p: DVec3) -> f64 {
     gradient_noise_with(seed, p, gradient)
 }
 
@@ -133,7 +133,14 @@ fn gradient_noise_with(seed: u64, p: DVec3, gradient: impl Fn(u64) -> DVec3) -> 
 /// and `gain` times the amplitude of the previous one, normalised so the sum stays roughly in
 /// `[-1, 1]`. `wavelength` is the period of the first octave in metres; octaves whose
 /// wavelength falls below about two texels (`texel` metres) fade out instead of aliasing.
-pub fn fbm(seed: u64, p: DVec3, wavelength: f64, octaves: u32, gain: f64, texel: f64) -> f64 {
+pub(crate) fn fbm(
+    seed: u64,
+    p: DVec3,
+    wavelength: f64,
+    octaves: u32,
+    gain: f64,
+    texel: f64,
+) -> f64 {
     let mut sum = 0.0;
     let mut norm = 0.0;
     let mut amp = 1.0;
@@ -154,7 +161,7 @@ pub fn fbm(seed: u64, p: DVec3, wavelength: f64, octaves: u32, gain: f64, texel:
 
 /// How much of a feature with period `lambda` survives sampling every `texel`: 1 well above
 /// the Nyquist limit, fading to 0 at about two texels.
-pub fn band_limit(lambda: f64, texel: f64) -> f64 {
+pub(crate) fn band_limit(lambda: f64, texel: f64) -> f64 {
     smoothstep(2.0, 4.0, lambda / texel.max(1e-9))
 }
 
@@ -167,7 +174,7 @@ pub fn smoothstep(edge0: f64, edge1: f64, x: f64) -> f64 {
 /// The darkening profile of a thin line of half-width `width` at distance `d`, band-limited to
 /// the texel size: a line thinner than a texel is spread over about one texel with its total
 /// "ink" preserved, so it fades instead of aliasing into dotted fragments.
-pub fn line_profile(d: f64, width: f64, texel: f64) -> f64 {
+pub(crate) fn line_profile(d: f64, width: f64, texel: f64) -> f64 {
     let w = (width * width + 0.25 * texel * texel).sqrt();
     (width / w) * (-(d / w) * (d / w)).exp()
 }
