@@ -26,8 +26,13 @@ pub enum FileError {
     },
     /// A path this tool will not write to or replace (a folder given for a file, a file or
     /// folder that is not an earlier output of ours), said in full; it is left untouched.
-    #[error("{0}")]
-    Refused(String),
+    #[error("{path}: {detail}")]
+    Refused {
+        /// The file or folder, left untouched.
+        path: PathBuf,
+        /// Why it is refused and what to give instead.
+        detail: String,
+    },
 }
 
 impl FileError {
@@ -47,12 +52,20 @@ impl FileError {
         }
     }
 
+    /// A [`FileError::Refused`] for `path`.
+    pub fn refused(path: impl Into<PathBuf>, detail: impl Into<String>) -> Self {
+        FileError::Refused {
+            path: path.into(),
+            detail: detail.into(),
+        }
+    }
+
     /// What is wrong, without the path (for a caller that names the file itself).
     pub fn detail(&self) -> String {
         match self {
             FileError::Io { source, .. } => source.to_string(),
             FileError::Format { detail, .. } => detail.clone(),
-            FileError::Refused(message) => message.clone(),
+            FileError::Refused { detail, .. } => detail.clone(),
         }
     }
 }

@@ -78,10 +78,10 @@ fn remove_dead_writers_temporaries(dir: &Path, name: &str) {
 /// [`FileError::Refused`] naming the path and what it is not; an I/O error reading it.
 pub fn check_replaceable(path: &Path, magic: &[u8], kind: &str) -> Result<(), FileError> {
     if path.is_dir() {
-        return Err(FileError::Refused(format!(
-            "{}: is a folder, not a {kind} file",
-            path.display()
-        )));
+        return Err(FileError::refused(
+            path,
+            format!("is a folder, not a {kind} file"),
+        ));
     }
     if !path.exists() {
         return Ok(());
@@ -91,11 +91,13 @@ pub fn check_replaceable(path: &Path, magic: &[u8], kind: &str) -> Result<(), Fi
         .and_then(|mut f| std::io::Read::read(&mut f, &mut head))
         .map_err(|e| FileError::io(path, e))?;
     if read < magic.len() || head != magic {
-        return Err(FileError::Refused(format!(
-            "{}: exists and is not a {kind} file written by this tool; it was left untouched \
-             (choose another output name)",
-            path.display()
-        )));
+        return Err(FileError::refused(
+            path,
+            format!(
+                "exists and is not a {kind} file written by this tool; it was left untouched \
+             (choose another output name)"
+            ),
+        ));
     }
     Ok(())
 }
@@ -115,10 +117,7 @@ pub fn write_folder_atomically(
     replaceable: impl Fn(&Path) -> bool,
 ) -> Result<(), FileError> {
     if dir.is_file() {
-        return Err(FileError::Refused(format!(
-            "{}: is a file; give a folder",
-            dir.display()
-        )));
+        return Err(FileError::refused(dir, "is a file; give a folder"));
     }
     let exists = dir.is_dir();
     let empty = exists
@@ -127,16 +126,16 @@ pub fn write_folder_atomically(
             .next()
             .is_none();
     if exists && !empty && !replaceable(dir) {
-        return Err(FileError::Refused(format!(
-            "{}: a folder that is not an earlier output of this command; give a new or empty \
+        return Err(FileError::refused(
+            dir,
+            "a folder that is not an earlier output of this command; give a new or empty \
              folder (nothing was written)",
-            dir.display()
-        )));
+        ));
     }
     let name = dir
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
-        .ok_or_else(|| FileError::Refused(format!("{}: not a folder name", dir.display())))?;
+        .ok_or_else(|| FileError::refused(dir, "not a folder name"))?;
     let parent = match dir.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => std::path::PathBuf::from("."),
