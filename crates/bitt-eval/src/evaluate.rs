@@ -94,6 +94,87 @@ pub fn albedo_in_shade(
         .then(|| (shade.0 / shade.1 as f64) / (open.0 / open.1 as f64))
 }
 
+/// Detail a texture has where no photo shows the hand, beyond its prior's (issue 34, palm):
+/// see [`unseen_detail`].
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct UnseenDetail {
+    /// Texels (both hands together) of the region that neither hand's photo shows.
+    pub texels: usize,
+    /// Mean absolute high-pass of `texture - prior` on them (all channels, `[0, 1]` values):
+    /// detail the texture has there and the prior does not.
+    pub invented: f64,
+    /// Mean absolute high-pass of the prior on them: the prior's own detail, for scale.
+    pub prior: f64,
+    /// Mean `|texture - prior|` on them: how far the colour moved from the prior's.
+    pub shift: f64,
+}
+
+/// Side of the square UV window [`unseen_detail`]'s high-pass subtracts the mean of.
+pub const DETAIL_WINDOW: usize = 5;
+
+/// How much detail `texture` (`[3, T]` per hand) invented where neither photo shows the
+/// hand: over the texels of `region` that are visible in neither hand (BTR's other source is
+/// the same texel of the other hand), the mean absolute high-pass of `texture - prior`, where
+/// the high-pass of a texel is its value minus the mean of the used texels in the
+/// [`DETAIL_WINDOW`]-square window around it on `layout`'s UV grid. A texture that keeps
+/// the prior's detail and only shifts its colour smoothly reads near 0; one that paints
+/// creases, spots or streaks there reads like [`UnseenDetail::prior`] or above. `None`
+/// with fewer than 20 such texels, or textures that do not fit `layout`.
+pub fn unseen_detail(
+    texture: &[Vec<f32>; 2],
+    prior: &[Vec<f32>; 2],
+    visible: &[Vec<bool>; 2],
+    region: &[Vec<bool>; 2],
+    layout: &bitt_texture::TextureLayout,
+) -> Option<UnseenDetail> {
+    let t = layout.num_texels();
+    let fits = |v: &[Vec<f32>; 2]| v.iter().all(|x| x.len() == 3 * t);
+    let fits_mask = |v: &[Vec<bool>; 2]| v.iter().all(|x| x.len() == t);
+    if !(fits(texture) && fits(prior) && fits_mask(visible) && fits_mask(region)) {
+        return None;
+    }
+    let r = (DETAIL_WINDOW / 2) as i64;
+    // The high-pass of channel `c` of `values` at texel `i`.
+    let high_pass = |values: &dyn Fn(usize) -> f64, c: usize, i: usize| {
+        let (row, col) = layout.texels[i];
+        let (mut sum, mut n) = (0.0, 0usize);
+        for dy in -r..=r {
+            for dx in -r..=r {
+                let (y, x) = (i64::from(row) + dy, i64::from(col) + dx);
+                if y < 0 || x < 0 {
+                    continue;
+                }
+                if let Some(j) = layout.compact_index(y as usize, x as usize) {
+                    sum += values(c * t + j);
+                    n += 1;
+                }
+            }
+        }
+        values(c * t + i) - sum / n as f64
+    };
+    let (mut invented, mut own, mut shift, mut texels) = (0.0, 0.0, 0.0, 0usize);
+    for h in 0..2 {
+        let (tex, pri) = (&texture[h], &prior[h]);
+        let diff = |k: usize| f64::from(tex[k]) - f64::from(pri[k]);
+        let pri_at = |k: usize| f64::from(pri[k]);
+        for i in (0..t).filter(|&i| region[h][i] && !visible[0][i] && !visible[1][i]) {
+            texels += 1;
+            for c in 0..3 {
+                invented += high_pass(&diff, c, i).abs();
+                own += high_pass(&pri_at, c, i).abs();
+                shift += diff(c * t + i).abs();
+            }
+        }
+    }
+    let n = (3 * texels) as f64;
+    (texels >= 20).then(|| UnseenDetail {
+        texels,
+        invented: invented / n,
+        prior: own / n,
+        shift: shift / n,
+    })
+}
+
 /// Replaces each texel of `fine` (`[3, T]`) whose HSV saturation, as it is or rounded to 8
 /// bits, is above [`MAX_SKIN_SATURATION`] with the same texel of `coarse` (the texture
 /// prior's); returns how many were replaced. The avatar's fine textures pass through it, so
@@ -366,6 +447,105 @@ mod tests {
         assert!((r - 0.5).abs() < 1e-6, "{r}");
         let few = [(0..t).map(|i| i < 10).collect(), vec![false; t]];
         assert_eq!(albedo_in_shade(&baked, &few, &ao), None);
+    }
+
+    /// A texture that only shifts the prior's colour invents nothing; streaks painted on
+    /// unseen texels read as invented detail; texels either hand shows, or outside the region,
+    /// do not count.
+    #[test]
+    fn unseen_detail_reads_what_the_texture_adds_to_the_prior() {
+        let (w, h) = (16usize, 16usize);
+        let texels: Vec<(u32, u32)> = (0..h as u32)
+            .flat_map(|r| (0..w as u32).map(move |c| (r, c)))
+            .filter(|&(r, c)| (r + c) % 7 != 0)
+            .collect();
+        let layout = bitt_texture::TextureLayout::from_texels(w, h, texels, None).unwrap();
+        let t = layout.num_texels();
+        // A prior with detail (a checker), and a texture 0.1 brighter everywhere.
+        let prior: Vec<f32> = (0..3 * t)
+            .map(|k| {
+                let (r, c) = layout.texels[k % t];
+                if (r + c) % 2 == 0 { 0.5 } else { 0.4 }
+            })
+            .collect();
+        let shifted: Vec<f32> = prior.iter().map(|v| v + 0.1).collect();
+        let visible = [vec![false; t], vec![false; t]];
+        let everywhere = [vec![true; t], vec![true; t]];
+        let prior2 = [prior.clone(), prior.clone()];
+        let d = unseen_detail(
+            &[shifted.clone(), shifted.clone()],
+            &prior2,
+            &visible,
+            &everywhere,
+            &layout,
+        )
+        .unwrap();
+        assert_eq!(d.texels, 2 * t);
+        assert!(d.invented < 1e-6, "{d:?}");
+        assert!((d.shift - 0.1).abs() < 1e-6, "{d:?}");
+        assert!(
+            d.prior > 0.03,
+            "the checker is the prior's own detail: {d:?}"
+        );
+        // Streaks: every fourth column 0.3 darker.
+        let streaked: Vec<f32> = shifted
+            .iter()
+            .enumerate()
+            .map(|(k, v)| {
+                if layout.texels[k % t].1.is_multiple_of(4) {
+                    v - 0.3
+                } else {
+                    *v
+                }
+            })
+            .collect();
+        let s = unseen_detail(
+            &[streaked.clone(), streaked.clone()],
+            &prior2,
+            &visible,
+            &everywhere,
+            &layout,
+        )
+        .unwrap();
+        assert!(s.invented > 0.1, "{s:?}");
+        // Seen texels (by either hand) and texels outside the region do not count.
+        let seen_right: Vec<bool> = (0..t)
+            .map(|i| layout.texels[i].1.is_multiple_of(4))
+            .collect();
+        let v = unseen_detail(
+            &[streaked.clone(), streaked.clone()],
+            &prior2,
+            &[vec![false; t], seen_right.clone()],
+            &everywhere,
+            &layout,
+        )
+        .unwrap();
+        assert_eq!(
+            v.texels,
+            2 * (t - seen_right.iter().filter(|&&s| s).count())
+        );
+        assert!(v.invented < s.invented, "{v:?} vs {s:?}");
+        let none = [vec![false; t], vec![false; t]];
+        assert_eq!(
+            unseen_detail(
+                &[streaked.clone(), streaked],
+                &prior2,
+                &visible,
+                &none,
+                &layout
+            ),
+            None
+        );
+        assert_eq!(
+            unseen_detail(
+                &[vec![0.0; 3], vec![0.0; 3]],
+                &prior2,
+                &visible,
+                &everywhere,
+                &layout
+            ),
+            None
+        );
     }
 
     /// Texel classes: visible, invisible, of which usable by symmetry or hidden on both.

@@ -38,8 +38,8 @@ pub use pca::{
     FitProgress, FitStage, NoProgress, PcaFitReport, PcaProjector, TexturePca, TexturePcaTensors,
 };
 pub use procedural::{
-    EvalReport, ProceduralTextureConfig, SkinIdentity, generate_texture, procedural_texture_model,
-    procedural_texture_pca, procedural_texture_pca_with_progress,
+    EvalReport, ProceduralTextureConfig, SkinIdentity, generate_texture, palm_side_texels,
+    procedural_texture_model, procedural_texture_pca, procedural_texture_pca_with_progress,
 };
 
 #[cfg(test)]

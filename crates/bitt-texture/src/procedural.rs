@@ -51,5 +51,5 @@ pub use fit::{
     EvalReport, ProceduralTextureConfig, procedural_texture_model, procedural_texture_pca,
     procedural_texture_pca_with_progress,
 };
-pub use generate::generate_texture;
+pub use generate::{generate_texture, palm_side_texels};
 pub use identity::SkinIdentity;

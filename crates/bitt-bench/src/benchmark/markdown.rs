@@ -102,6 +102,36 @@ pub fn photos_markdown(
         );
         md.extend(shade);
     }
+    let palm: Vec<String> = photo_results
+        .iter()
+        .flat_map(|r| {
+            let train = &r.photos.as_ref().expect("filtered").train;
+            r.methods.iter().filter_map(move |(method, scores)| {
+                let d = scores.photo?.unseen_palm?;
+                Some(format!(
+                    "| {train} | {} | {} | {:.4} | {:.4} | {:.4} |\n",
+                    method.key(),
+                    d.texels,
+                    d.invented,
+                    d.prior,
+                    d.shift
+                ))
+            })
+        })
+        .collect();
+    if !palm.is_empty() {
+        md.push_str(&format!(
+            "\nUnseen palm: on the palm-side texels neither hand's training photo shows, the \
+             detail the texture adds to its prior's (mean absolute high-pass of texture - prior, \
+             the high-pass being a texel minus the mean of its {w} x {w} UV window), the \
+             prior's own detail there (the same high-pass of the prior) and how far the colour \
+             moved (mean |texture - prior|); [0, 1] values.\n\n\
+             | trained on | method | texels | invented detail | prior's detail | colour shift |\n\
+             |---|---|---|---|---|---|\n",
+            w = bitt::evaluate::DETAIL_WINDOW
+        ));
+        md.extend(palm);
+    }
     if !consistency.is_empty() {
         md.push_str(
             "\nConsistency: BiTT's fine textures of two photos on the texels both show (the \

@@ -30,6 +30,9 @@ use bitt_stdx::to_host;
 struct Candidate {
     textures: [Vec<f32>; 2],
     light: LightValues,
+    /// The texture prior the method started from, for [`bitt::evaluate::unseen_detail`]
+    /// (BiTT: its coarse textures).
+    prior: Option<[Vec<f32>; 2]>,
 }
 
 /// One scored view's ground truth: the hand image, the posed geometry, the hands and, for
@@ -49,6 +52,9 @@ struct Truth {
     /// Photo scenes: the input view's ambient occlusion at every texel (for
     /// [`bitt::evaluate::albedo_in_shade`]), made once for all methods.
     input_occlusion: Option<[Vec<f32>; 2]>,
+    /// Photo scenes: the palm-side texels of each hand ([`bitt_texture::palm_side_texels`]),
+    /// for [`bitt::evaluate::unseen_detail`].
+    palm: Option<[Vec<bool>; 2]>,
 }
 
 /// What [`Truth::from_views`] needs of a view: its ground-truth hand image, its hands and
@@ -75,15 +81,28 @@ impl Truth {
             })
         };
         let input = prep(input)?;
-        let input_occlusion = match input.photo {
-            Some(_) => Some(input.geometry.texel_occlusion(&trainer.assets)?),
-            None => None,
+        let (input_occlusion, palm) = match input.photo {
+            Some(_) => {
+                let assets = &trainer.assets;
+                let palm = |k: usize, side: bitt_mesh::Side| {
+                    bitt_texture::palm_side_texels(&assets.layouts[k], assets.models.get(side))
+                };
+                (
+                    Some(input.geometry.texel_occlusion(assets)?),
+                    Some([
+                        palm(0, bitt_mesh::Side::Left)?,
+                        palm(1, bitt_mesh::Side::Right)?,
+                    ]),
+                )
+            }
+            None => (None, None),
         };
         Ok(Truth {
             input,
             views: views.iter().map(prep).collect::<Result<_, _>>()?,
             poses: poses.iter().map(prep).collect::<Result<_, _>>()?,
             input_occlusion,
+            palm,
         })
     }
 
@@ -198,10 +217,21 @@ fn score(
         .input_occlusion
         .as_ref()
         .and_then(|ao| bitt::evaluate::albedo_in_shade(&c.textures, visible, ao));
+    let unseen_palm = match (&truth.palm, &c.prior) {
+        (Some(palm), Some(prior)) => bitt::evaluate::unseen_detail(
+            &c.textures,
+            prior,
+            visible,
+            palm,
+            &trainer.assets.layouts[0],
+        ),
+        _ => None,
+    };
     let photo = input_photo.map(|input_view| PhotoScores {
         input_view,
         novel_poses: mean_photo_metrics(&pose_photos),
         albedo_in_shade: shade,
+        unseen_palm,
     });
     let texture: TextureErrors = gt_textures
         .map(|gt| texture_errors(&c.textures, gt, visible))
@@ -426,15 +456,16 @@ fn evaluate_with(
         }
         let mut candidates = Vec::new();
         if methods.contains(&m) {
-            candidates.push((m, avatar.fine.clone(), seconds));
+            candidates.push((m, avatar.fine.clone(), seconds, Some(avatar.coarse.clone())));
         }
         if m == Method::Bitt && methods.contains(&Method::Html) {
-            candidates.push((Method::Html, avatar.coarse.clone(), 0.0));
+            candidates.push((Method::Html, avatar.coarse.clone(), 0.0, None));
         }
-        for (method, textures, secs) in candidates {
+        for (method, textures, secs, prior) in candidates {
             let c = Candidate {
                 textures,
                 light: avatar.light,
+                prior,
             };
             let (mut s, sheet) = score(&trainer, &truth, &c, &visible, source.gt_textures, lpips)?;
             s.seconds = secs;
@@ -474,6 +505,7 @@ fn evaluate_with(
         let c = Candidate {
             textures: out.textures,
             light: out.light,
+            prior: None,
         };
         let (mut s, sheet) = score(&trainer, &truth, &c, &visible, source.gt_textures, lpips)?;
         s.seconds = seconds;

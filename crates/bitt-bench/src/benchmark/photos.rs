@@ -80,6 +80,11 @@ pub struct PhotoScores {
     /// before it, or with too few texels in either class.
     #[serde(default)]
     pub albedo_in_shade: Option<f64>,
+    /// Detail the method's texture added to its prior's on the palm-side texels neither
+    /// hand's training photo shows ([`bitt::evaluate::unseen_detail`]; issue 34, palm).
+    /// `None` for methods without a prior, and in results made before it.
+    #[serde(default)]
+    pub unseen_palm: Option<bitt::evaluate::UnseenDetail>,
 }
 
 /// The mean of several [`PhotoMetrics`] (`None` for none).

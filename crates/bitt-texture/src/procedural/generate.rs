@@ -102,6 +102,49 @@ pub fn generate_texture(
     Ok(out)
 }
 
+/// Which texels of `layout` lie on the palm side of `hand` (the shader's own palm/back split:
+/// each texel's rest-pose normal against the local nail-side direction, see
+/// [`generate_texture`]'s layers). Works for any hand model with a UV layout, MANO
+/// included.
+///
+/// # Errors
+/// A layout without per-texel faces, or one that does not fit `hand`.
+pub fn palm_side_texels(
+    layout: &TextureLayout,
+    hand: &HandModel,
+) -> Result<Vec<bool>, TextureError> {
+    let geometry = TexelGeometry::new(layout, hand)?;
+    let skeleton = HandSkeleton::new(hand)?;
+    Ok(geometry
+        .points
+        .iter()
+        .zip(&geometry.normals)
+        .map(|(p, n)| dorsal_weight(&skeleton, *n, &skeleton.digits[THUMB].locate(*p)) < 0.5)
+        .collect())
+}
+
+/// 1 on the back of the hand, 0 on the palm side, from the normal against the local
+/// nail-side direction (`+y`, turned towards the thumb's own nail side along the thumb).
+fn dorsal_weight(skel: &HandSkeleton, n: DVec3, thumb: &DigitCoord) -> f64 {
+    let d = &skel.digits[THUMB];
+    let along = smoothstep(
+        0.15 * d.segment_length(0),
+        0.6 * d.segment_length(0),
+        thumb.s,
+    );
+    let near = smoothstep(2.6 * d.radius, 1.7 * d.radius, thumb.dist);
+    let w = along * near;
+    let seg = if thumb.s < d.s[1] {
+        0
+    } else if thumb.s < d.s[2] {
+        1
+    } else {
+        2
+    };
+    let e1 = (DVec3::Y * (1.0 - w) + d.nail_direction(seg) * w).normalize_or(DVec3::Y);
+    smoothstep(-0.28, 0.28, n.dot(e1))
+}
+
 /// Everything the per-texel shader needs, prepared once per hand.
 pub(super) struct Shader<'a> {
     skel: &'a HandSkeleton,
@@ -255,26 +298,9 @@ impl<'a> Shader<'a> {
         self.dorsal_weight(n, &self.skel.digits[THUMB].locate(p))
     }
 
-    /// 1 on the back of the hand, 0 on the palm side, from the normal against the local
-    /// nail-side direction (`+y`, turned towards the thumb's own nail side along the thumb).
+    /// [`dorsal_weight`] with this hand's skeleton.
     fn dorsal_weight(&self, n: DVec3, thumb: &DigitCoord) -> f64 {
-        let d = &self.skel.digits[THUMB];
-        let along = smoothstep(
-            0.15 * d.segment_length(0),
-            0.6 * d.segment_length(0),
-            thumb.s,
-        );
-        let near = smoothstep(2.6 * d.radius, 1.7 * d.radius, thumb.dist);
-        let w = along * near;
-        let seg = if thumb.s < d.s[1] {
-            0
-        } else if thumb.s < d.s[2] {
-            1
-        } else {
-            2
-        };
-        let e1 = (DVec3::Y * (1.0 - w) + d.nail_direction(seg) * w).normalize_or(DVec3::Y);
-        smoothstep(-0.28, 0.28, n.dot(e1))
+        dorsal_weight(self.skel, n, thumb)
     }
 
     /// Fingertips redder, pads pinker, flexion creases on the palm side of the digits.

@@ -6,7 +6,7 @@ use std::sync::OnceLock;
 use bitt_mesh::{HandModel, Side, default_hand};
 
 use super::anatomy::{HandSkeleton, TexelGeometry};
-use super::{SkinIdentity, generate_texture};
+use super::{SkinIdentity, generate_texture, palm_side_texels};
 use crate::layout::TextureLayout;
 
 struct Fixture {
@@ -248,15 +248,24 @@ fn left_texels_are_the_mirror_of_right_texels() {
 #[test]
 fn dorsal_weight_agrees_with_the_uv_halves() {
     // The UV layout puts palm-side charts in the left half: the shader's own palm/back split
-    // (from normals) should agree away from the seams.
+    // (from normals) should agree away from the seams; `palm_side_texels` is that split.
     let f = fixture();
     let geo = TexelGeometry::new(&f.layout, &f.right).unwrap();
     let skel = HandSkeleton::new(&f.right).unwrap();
     let id = SkinIdentity::sample(0);
     let shader = super::generate::Shader::new(&skel, &id, Side::Right, geo.texel_size);
+    let palm = palm_side_texels(&f.layout, &f.right).unwrap();
+    assert_eq!(palm.len(), f.layout.num_texels());
     let (mut agree, mut total) = (0, 0);
-    for ((p, n), (_, col)) in geo.points.iter().zip(&geo.normals).zip(&f.layout.texels) {
+    for (((p, n), (_, col)), palm) in geo
+        .points
+        .iter()
+        .zip(&geo.normals)
+        .zip(&f.layout.texels)
+        .zip(&palm)
+    {
         let w = shader.dorsal_at(*p, *n);
+        assert_eq!(*palm, w < 0.5);
         if (0.2..0.8).contains(&w) {
             continue;
         }
@@ -267,6 +276,8 @@ fn dorsal_weight_agrees_with_the_uv_halves() {
     }
     let frac = f64::from(agree) / f64::from(total);
     assert!(frac > 0.95, "only {frac:.3} of {total} texels agree");
+    // The left hand's split is the mirror image: the same texels.
+    assert_eq!(palm_side_texels(&f.layout, &f.left).unwrap(), palm);
 }
 
 #[test]
