@@ -11,7 +11,10 @@
 //! 3. **masked**: with the hands found so far painted black, the palm detector again: a hand
 //!    hidden behind a more confident one becomes the best palm;
 //! 4. **ring**: hand rectangles around each found hand (the other hand of a pair touches it),
-//!    at several rotations and sizes, scored by the landmark model's presence.
+//!    at several rotations and sizes, scored by the landmark model's presence;
+//! 5. **look**: with one hand found, the landmark model where the hypothesis places the
+//!    other one; a reading of the missing side, apart from the found hand, is taken as that
+//!    hand. Otherwise the hypothesis itself is placed (presence 0).
 //!
 //! Candidates that lie on the same hand are merged; the two hands are then the pair of
 //! distinct hands that maximises presence times the probability of each one's side, with
@@ -58,9 +61,26 @@ pub struct SearchConfig {
     pub hypothesis: bool,
     /// See [`SearchConfig::hypothesis`].
     pub hypothesis_shift: f64,
+    /// With one hand found, run the landmark model on the rectangle of the hypothesis (at
+    /// 0.8, 1 and 1.25 of its size) before placing it: a reading that calls the missing side
+    /// with at least [`SearchConfig::look_min_side`] and whose wrist lies at least a third
+    /// of a palm from the found hand's becomes the missing hand (stage `look`).
+    #[serde(default = "yes")]
+    pub look: bool,
+    /// See [`SearchConfig::look`].
+    #[serde(default = "look_min_side_default")]
+    pub look_min_side: f64,
     /// The hypothesis' size relative to the found hand (about its wrist): the found hand's
     /// wrist landmark tends to sit on the forearm when the other hand hides the palm.
     pub hypothesis_scale: f64,
+}
+
+fn yes() -> bool {
+    true
+}
+
+fn look_min_side_default() -> f64 {
+    0.7
 }
 
 impl Default for SearchConfig {
@@ -76,6 +96,8 @@ impl Default for SearchConfig {
             max_palms: 8,
             hypothesis: true,
             hypothesis_shift: 0.8,
+            look: true,
+            look_min_side: look_min_side_default(),
             hypothesis_scale: 0.75,
         }
     }
@@ -95,7 +117,7 @@ pub struct DetectedHand {
     pub side_probability: f64,
     /// The palm detector's score of the palm it started from (`None` for the ring stage).
     pub palm_score: Option<f64>,
-    /// The stage that found it: `palms`, `masked` or `ring`.
+    /// The stage that found it: `palms`, `masked`, `ring`, `look` or `hypothesis`.
     pub stage: String,
     /// The crop the final landmarks came from.
     pub rect: Rect,
@@ -104,7 +126,7 @@ pub struct DetectedHand {
 /// What one stage of the search did.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StageReport {
-    /// `palms`, `masked` or `ring`.
+    /// `palms`, `masked`, `ring`, `look` or `hypothesis`.
     pub stage: String,
     /// Palm detector inputs run.
     pub palm_runs: usize,
@@ -354,6 +376,30 @@ pub fn detect_hands(
         .map(|c| c.hand.presence)
         .fold(0.0, f64::max);
     let mut chosen = pick(&candidates, config, long);
+    // 5. look
+    if config.look {
+        let found = match (&chosen.left, &chosen.right) {
+            (Some(found), None) => Some((Side::Right, found.clone())),
+            (None, Some(found)) => Some((Side::Left, found.clone())),
+            _ => None,
+        };
+        if let Some((missing, found)) = found {
+            let t = Instant::now();
+            let mut runs = 0;
+            let other = look(detector, image, &found, missing, config, long, &mut runs)?;
+            match missing {
+                Side::Left => chosen.left = other,
+                Side::Right => chosen.right = other,
+            }
+            stages.push(StageReport {
+                stage: "look".into(),
+                palm_runs: 0,
+                landmark_runs: runs,
+                hands: 1 + usize::from(!chosen.missing()),
+                seconds: t.elapsed().as_secs_f64(),
+            });
+        }
+    }
     if config.hypothesis {
         let t = Instant::now();
         let placed = match (&chosen.left, &chosen.right) {
@@ -444,6 +490,62 @@ fn hypothesis(found: &Candidate, shift: f64, k: f64) -> Candidate {
         palm_score: None,
         stage: "hypothesis",
     }
+}
+
+/// Stage `look` ([`SearchConfig::look`]): the landmark model on the rectangle where the
+/// hypothesis places the `missing` hand, at three sizes. No tracking step: it drifts onto
+/// the found hand, which dominates such crops. The best reading (presence times the
+/// probability of the missing side) that calls the missing side with at least
+/// [`SearchConfig::look_min_side`], looks like a hand, and has its wrist at least a third
+/// of a palm from the found hand's, is the missing hand.
+fn look(
+    detector: &HandDetector,
+    image: &RgbImage,
+    found: &Candidate,
+    missing: Side,
+    config: &SearchConfig,
+    long: f64,
+    runs: &mut usize,
+) -> Result<Option<Candidate>, DetectError> {
+    let placed = hypothesis(found, config.hypothesis_shift, config.hypothesis_scale);
+    let r = rect_from_landmarks(&placed.hand.points);
+    let rects: Vec<Rect> = [0.8, 1.0, 1.25]
+        .iter()
+        .map(|k| Rect {
+            center: r.center,
+            size: [r.size[0] * k, r.size[1] * k],
+            rotation: r.rotation,
+        })
+        .collect();
+    *runs += rects.len();
+    let min_size = (config.min_hand_size * long).max(16.0);
+    let palm = found.palm_length().max(1.0);
+    let side_probability = |c: &Candidate| match missing {
+        Side::Right => c.hand.right,
+        Side::Left => 1.0 - c.hand.right,
+    };
+    let best = detector
+        .landmarks(image, &rects)?
+        .into_iter()
+        .map(|hand| Candidate {
+            first_crop: hand.rect.size[0],
+            hand,
+            palm_score: None,
+            stage: "look",
+        })
+        .filter(|c| {
+            let (a, b) = (&c.hand.points[0], &found.hand.points[0]);
+            let apart = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt() >= palm / 3.0;
+            c.hand.presence >= config.min_presence
+                && c.plausible(min_size)
+                && side_probability(c) >= config.look_min_side
+                && apart
+        })
+        .max_by(|a, b| {
+            (a.hand.presence * side_probability(a))
+                .total_cmp(&(b.hand.presence * side_probability(b)))
+        });
+    Ok(best)
 }
 
 /// Palms of all views merged (the same palm seen in two views counts once), without boxes

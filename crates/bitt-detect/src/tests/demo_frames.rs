@@ -159,6 +159,7 @@ fn demo_frames_give_both_hands_of_the_right_sides() {
     let det = HandDetector::builtin(&burn::tensor::Device::flex()).expect("weights");
     let config = SearchConfig::default();
     let mut failures = Vec::new();
+    let mut both_detected = 0;
     for (name, want_detected) in [("01", 2), ("02", 1)] {
         let Some((img, pkl)) = demo(name) else {
             return;
@@ -177,11 +178,14 @@ fn demo_frames_give_both_hands_of_the_right_sides() {
             });
             let d = detect_hands(&det, &v.image, &config).expect("search");
             match check_sides(&d, &t, &what) {
-                Ok(found) if !found.is_empty() => eprintln!(
-                    "{what}: detected {found:?}{}",
-                    d.hypothesized()
-                        .map_or(String::new(), |s| format!(", {s} by hypothesis"))
-                ),
+                Ok(found) if !found.is_empty() => {
+                    both_detected += usize::from(found.len() == 2);
+                    eprintln!(
+                        "{what}: detected {found:?}{}",
+                        d.hypothesized()
+                            .map_or(String::new(), |s| format!(", {s} by hypothesis"))
+                    )
+                }
                 Ok(_) => failures.push(format!("{what}: nothing detected")),
                 Err(e) => failures.push(e),
             }
@@ -201,6 +205,13 @@ fn demo_frames_give_both_hands_of_the_right_sides() {
         .filter(|f| !known.iter().any(|k| f.starts_with(&format!("{k}:"))))
         .collect();
     assert!(new.is_empty(), "new misses: {new:#?}");
+    // Both hands detected, on the right sides, in 5 of the 14 copies: three of them (01
+    // resized 0.75, off-centre, rotated -20) get their left hand from the look stage, which
+    // the hypothesis placed before it.
+    assert!(
+        both_detected >= 5,
+        "both hands detected in {both_detected} copies"
+    );
     if failures.len() == known.len() {
         assert_eq!(missed.len(), known.len(), "{failures:#?}");
     } else {
