@@ -190,13 +190,19 @@ impl Candidate {
         size >= 0.2 * self.first_crop && size >= min_size
     }
 
+    /// Distance between two candidates' wrists (pixels).
+    fn wrist_distance(&self, other: &Candidate) -> f64 {
+        let (a, b) = (&self.hand.points[0], &other.hand.points[0]);
+        ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
+    }
+
     /// Whether two candidates cannot be the two hands of a pair: their wrists are within a
     /// third of a palm length and their points within half of one on average (the landmark
     /// model sometimes calls the same hand left in one crop and right in another).
     fn overlaps(&self, other: &Candidate) -> bool {
         let palm = self.palm_length().max(other.palm_length()).max(1.0);
         let (a, b) = (&self.hand.points, &other.hand.points);
-        let wrist = ((a[0][0] - b[0][0]).powi(2) + (a[0][1] - b[0][1]).powi(2)).sqrt();
+        let wrist = self.wrist_distance(other);
         let mean: f64 = a
             .iter()
             .zip(b)
@@ -534,12 +540,10 @@ fn look(
             stage: "look",
         })
         .filter(|c| {
-            let (a, b) = (&c.hand.points[0], &found.hand.points[0]);
-            let apart = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt() >= palm / 3.0;
             c.hand.presence >= config.min_presence
                 && c.plausible(min_size)
                 && side_probability(c) >= config.look_min_side
-                && apart
+                && c.wrist_distance(found) >= palm / 3.0
         })
         .max_by(|a, b| {
             (a.hand.presence * side_probability(a))
