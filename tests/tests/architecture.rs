@@ -400,3 +400,66 @@ fn the_code_map_names_every_source_file() {
         unnamed.join("\n")
     );
 }
+
+/// The `[profile.<name>.package.<crate>]` sections of the workspace's Cargo.toml with their
+/// `opt-level`.
+fn opt_levels(manifest: &str, profile: &str) -> BTreeMap<String, String> {
+    let head = format!("[profile.{profile}.package.");
+    let mut out = BTreeMap::new();
+    let mut current: Option<String> = None;
+    for line in manifest.lines().map(str::trim) {
+        if line.starts_with('[') {
+            current = line
+                .strip_prefix(&head)
+                .and_then(|rest| rest.strip_suffix(']'))
+                .map(|name| name.trim_matches('"').to_string());
+        } else if let (Some(name), Some(level)) = (&current, line.strip_prefix("opt-level")) {
+            let level = level.trim_start().trim_start_matches('=').trim();
+            out.insert(name.clone(), level.trim_matches('"').to_string());
+        }
+    }
+    out
+}
+
+/// Cargo.toml's release profile leaves the GPU stack and ndarray unoptimised (a shorter first
+/// build); the `gpu` profile, which `cargo xtask gpu-bundle` builds, optimises every one of
+/// them again, and flex and burn-dispatch are never among them.
+#[test]
+fn the_gpu_profile_optimises_what_the_release_profile_does_not() {
+    let manifest = std::fs::read_to_string(root().join("Cargo.toml")).unwrap();
+    let release = opt_levels(&manifest, "release");
+    let gpu = opt_levels(&manifest, "gpu");
+    let lowered: Vec<&String> = release
+        .iter()
+        .filter(|(_, level)| level.as_str() != "3")
+        .map(|(name, _)| name)
+        .collect();
+    assert!(lowered.len() >= 20, "{release:?}");
+    for name in &lowered {
+        assert_eq!(
+            gpu.get(*name).map(String::as_str),
+            Some("3"),
+            "[profile.gpu.package.{name}] must set opt-level = 3"
+        );
+    }
+    for hot in ["burn-flex", "burn-dispatch", "burn-autodiff", "gemm", "*"] {
+        assert!(
+            !lowered.iter().any(|n| n.as_str() == hot),
+            "{hot} is on the CPU path and must stay optimised"
+        );
+    }
+}
+
+#[test]
+fn opt_levels_reads_package_sections() {
+    let manifest = "[profile.release]\nopt-level = 3\n[profile.release.package.\"*\"]\ndebug = false\n\
+                    [profile.release.package.naga]\nopt-level = 0\n[profile.gpu.package.naga]\nopt-level = 3\n";
+    assert_eq!(
+        opt_levels(manifest, "release"),
+        BTreeMap::from([("naga".to_string(), "0".to_string())])
+    );
+    assert_eq!(
+        opt_levels(manifest, "gpu"),
+        BTreeMap::from([("naga".to_string(), "3".to_string())])
+    );
+}

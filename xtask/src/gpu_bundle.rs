@@ -1,6 +1,6 @@
-//! `cargo xtask gpu-bundle` (the stripped, gzipped release `bitt`, the Vulkan loader and a
-//! `run.sh`, for GPU machines without network) and `cargo xtask gpu-check` (that bundle run
-//! here, on whatever Vulkan adapter exists: lavapipe on a CPU-only machine).
+//! `cargo xtask gpu-bundle` (the stripped, gzipped `bitt` of the `gpu` profile, the Vulkan
+//! loader and a `run.sh`, for GPU machines without network) and `cargo xtask gpu-check` (that
+//! bundle run here, on whatever Vulkan adapter exists: lavapipe on a CPU-only machine).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 
-use crate::{build_bitt, check, root, runtime_dir};
+use crate::{build_bitt_gpu, check, root, runtime_dir};
 
 /// The bundle's folder at the repository root (ignored by git).
 pub const BUNDLE_DIR: &str = "gpu-bundle";
@@ -103,10 +103,11 @@ fn vulkan_loader(lib: &Path) -> Result<String> {
     Ok(from)
 }
 
-/// Builds the release `bitt` and writes the bundle; returns its folder.
+/// Builds `bitt` with the `gpu` profile (the GPU stack optimised) and writes the bundle;
+/// returns its folder.
 pub fn gpu_bundle() -> Result<PathBuf> {
     let start = Instant::now();
-    let bin = build_bitt()?;
+    let bin = build_bitt_gpu()?;
     let dir = root().join(BUNDLE_DIR);
     let lib = dir.join("lib");
     std::fs::create_dir_all(&lib).with_context(|| format!("creating {}", lib.display()))?;

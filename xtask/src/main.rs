@@ -34,7 +34,7 @@
 //! - `check-clients [--run DIR] [--iterations N] [--screenshot PNG] [--chromium PATH]`: a run's
 //!   outputs opened headless in the programs people view them with (Chromium: the report's 3D
 //!   view); not part of CI; see `docs/clients.md`.
-//! - `gpu-bundle`: the stripped, gzipped release `bitt`, the Vulkan loader and `run.sh` in
+//! - `gpu-bundle`: the stripped, gzipped `bitt` (gpu profile), the Vulkan loader and `run.sh` in
 //!   `gpu-bundle/` (under 64 MiB, for GPU machines without network); `gpu-check
 //!   [--reuse-bundle] [ARGS]`: that bundle's `bitt gpu-check` run here (`gpu_bundle.rs`,
 //!   `docs/gpu-check.md`).
@@ -102,7 +102,7 @@ fn build_bitt() -> Result<PathBuf> {
     let bin = release_dir().join(format!("bitt{}", std::env::consts::EXE_SUFFIX));
     if !bin.is_file() {
         println!(
-            "xtask: building the release `bitt` binary first (about 470 crates; 17 min from \
+            "xtask: building the release `bitt` binary first (about 470 crates; 10 min from \
              an empty target folder on 2 cores, then seconds)"
         );
     }
@@ -111,17 +111,49 @@ fn build_bitt() -> Result<PathBuf> {
     Ok(bin)
 }
 
+/// Builds `bitt` with the `gpu` profile (Cargo.toml: the release profile with the GPU stack
+/// optimised, which the release profile leaves unoptimised to halve the first build) and
+/// returns its path. A build of its own, in `target/gpu/`.
+fn build_bitt_gpu() -> Result<PathBuf> {
+    let bin = target_dir()
+        .join("gpu")
+        .join(format!("bitt{}", std::env::consts::EXE_SUFFIX));
+    if !bin.is_file() {
+        println!(
+            "xtask: building `bitt` with the gpu profile (a build of its own: about 17 min from \
+             an empty folder on 2 cores)"
+        );
+    }
+    let status = cargo()
+        .args([
+            "build",
+            "--profile",
+            "gpu",
+            "--package",
+            "bitt-cli",
+            "--bin",
+            "bitt",
+        ])
+        .status()?;
+    check(status, "building bitt (gpu profile)")?;
+    Ok(bin)
+}
+
 /// The cargo target directory's `release` folder (`CARGO_TARGET_DIR`, else `target/`).
 fn release_dir() -> PathBuf {
+    target_dir().join("release")
+}
+
+/// The cargo target directory (`CARGO_TARGET_DIR`, else `target/`).
+fn target_dir() -> PathBuf {
     let target = std::env::var_os("CARGO_TARGET_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|| root().join("target"));
-    let target = if target.is_relative() {
+    if target.is_relative() {
         root().join(target)
     } else {
         target
-    };
-    target.join("release")
+    }
 }
 
 /// Builds the release example `name` of a library crate (`bench_render`, `write_docs_images`,
