@@ -13,8 +13,10 @@
 //! 4. **ring**: hand rectangles around each found hand (the other hand of a pair touches it),
 //!    at several rotations and sizes, scored by the landmark model's presence;
 //! 5. **look**: with one hand found, the landmark model where the hypothesis places the
-//!    other one; a reading of the missing side, apart from the found hand, is taken as that
-//!    hand. Otherwise the hypothesis itself is placed (presence 0).
+//!    other one; a reading apart from the found hand is taken as the other hand. The two
+//!    hands' sides are then the more likely of the two opposite assignments: a confident
+//!    reading can relabel the found hand. Otherwise the hypothesis itself is placed
+//!    (presence 0).
 //!
 //! Candidates that lie on the same hand are merged; the two hands are then the pair of
 //! distinct hands that maximises presence times the probability of each one's side, with
@@ -62,9 +64,11 @@ pub struct SearchConfig {
     /// See [`SearchConfig::hypothesis`].
     pub hypothesis_shift: f64,
     /// With one hand found, run the landmark model on the rectangle of the hypothesis (at
-    /// 0.8, 1 and 1.25 of its size) before placing it: a reading that calls the missing side
-    /// with at least [`SearchConfig::look_min_side`] and whose wrist lies at least a third
-    /// of a palm from the found hand's becomes the missing hand (stage `look`).
+    /// 0.8, 1 and 1.25 of its size) before placing it: a reading whose wrist lies at least
+    /// a third of a palm from the found hand's becomes the other hand (stage `look`). The
+    /// two hands take opposite sides, whichever assignment has the higher product of the
+    /// two side probabilities (`look_sides`); the reading's side needs at least
+    /// [`SearchConfig::look_min_side`].
     #[serde(default = "yes")]
     pub look: bool,
     /// See [`SearchConfig::look`].
@@ -392,10 +396,17 @@ pub fn detect_hands(
         if let Some((missing, found)) = found {
             let t = Instant::now();
             let mut runs = 0;
-            let other = look(detector, image, &found, missing, config, long, &mut runs)?;
-            match missing {
-                Side::Left => chosen.left = other,
-                Side::Right => chosen.right = other,
+            if let Some((other, side)) =
+                look(detector, image, &found, missing, config, long, &mut runs)?
+            {
+                // `side` is the reading's: the missing one, or the found hand's, which the
+                // found hand then gives up.
+                let (reading, found_slot) = match side {
+                    Side::Left => (&mut chosen.left, &mut chosen.right),
+                    Side::Right => (&mut chosen.right, &mut chosen.left),
+                };
+                *reading = Some(other);
+                *found_slot = Some(found);
             }
             stages.push(StageReport {
                 stage: "look".into(),
@@ -500,10 +511,10 @@ fn hypothesis(found: &Candidate, shift: f64, k: f64) -> Candidate {
 
 /// Stage `look` ([`SearchConfig::look`]): the landmark model on the rectangle where the
 /// hypothesis places the `missing` hand, at three sizes. No tracking step: it drifts onto
-/// the found hand, which dominates such crops. The best reading (presence times the
-/// probability of the missing side) that calls the missing side with at least
-/// [`SearchConfig::look_min_side`], looks like a hand, and has its wrist at least a third
-/// of a palm from the found hand's, is the missing hand.
+/// the found hand, which dominates such crops. Among the readings that look like a hand and
+/// have their wrist at least a third of a palm from the found hand's, each gets its side
+/// from [`look_sides`]; the best (presence times the likelihood of its assignment) is the
+/// other hand, returned with its side.
 fn look(
     detector: &HandDetector,
     image: &RgbImage,
@@ -512,7 +523,7 @@ fn look(
     config: &SearchConfig,
     long: f64,
     runs: &mut usize,
-) -> Result<Option<Candidate>, DetectError> {
+) -> Result<Option<(Candidate, Side)>, DetectError> {
     let placed = hypothesis(found, config.hypothesis_shift, config.hypothesis_scale);
     let r = rect_from_landmarks(&placed.hand.points);
     let rects: Vec<Rect> = [0.8, 1.0, 1.25]
@@ -526,10 +537,6 @@ fn look(
     *runs += rects.len();
     let min_size = (config.min_hand_size * long).max(16.0);
     let palm = found.palm_length().max(1.0);
-    let side_probability = |c: &Candidate| match missing {
-        Side::Right => c.hand.right,
-        Side::Left => 1.0 - c.hand.right,
-    };
     let best = detector
         .landmarks(image, &rects)?
         .into_iter()
@@ -542,14 +549,51 @@ fn look(
         .filter(|c| {
             c.hand.presence >= config.min_presence
                 && c.plausible(min_size)
-                && side_probability(c) >= config.look_min_side
                 && c.wrist_distance(found) >= palm / 3.0
         })
-        .max_by(|a, b| {
-            (a.hand.presence * side_probability(a))
-                .total_cmp(&(b.hand.presence * side_probability(b)))
-        });
-    Ok(best)
+        .filter_map(|c| {
+            let (side, likelihood) = look_sides(
+                found.hand.right,
+                c.hand.right,
+                missing,
+                config.look_min_side,
+            )?;
+            Some((c.hand.presence * likelihood, c, side))
+        })
+        .max_by(|a, b| a.0.total_cmp(&b.0));
+    Ok(best.map(|(_, c, side)| (c, side)))
+}
+
+/// The sides of a found hand (which the search calls the side opposite `missing`) and a
+/// reading of the other hand, from each one's probability of being a right hand: the two
+/// take opposite sides, and of the two assignments the one with the higher product of the
+/// side probabilities wins (the landmark model reads each crop independently). Returns the
+/// reading's side and that product, or `None` when the reading's side probability is
+/// under `min_side`.
+///
+/// A reading can thereby relabel the found hand: on a copy of a demo frame enlarged 2.5
+/// times, a crop of the right hand reads left (0.85) and the hidden left hand left too
+/// (0.885); the right-left assignment (0.15 x 0.885) beats the left-right one
+/// (0.85 x 0.115).
+pub(crate) fn look_sides(
+    found_right: f64,
+    reading_right: f64,
+    missing: Side,
+    min_side: f64,
+) -> Option<(Side, f64)> {
+    let p = |right: f64, side: Side| match side {
+        Side::Right => right,
+        Side::Left => 1.0 - right,
+    };
+    let kept = missing.mirrored();
+    let keep = p(found_right, kept) * p(reading_right, missing);
+    let swap = p(found_right, missing) * p(reading_right, kept);
+    let (side, likelihood) = if swap > keep {
+        (kept, swap)
+    } else {
+        (missing, keep)
+    };
+    (p(reading_right, side) >= min_side).then_some((side, likelihood))
 }
 
 /// Palms of all views merged (the same palm seen in two views counts once), without boxes
@@ -955,6 +999,33 @@ mod tests {
             palm_score: Some(0.5),
             stage: "palms",
         }
+    }
+
+    /// The two hands take the more likely of the two opposite assignments; the reading's
+    /// side must be confident. Numbers read on copies of the demo frames.
+    #[test]
+    fn look_sides_choose_the_likelier_opposite_assignment() {
+        // 01 enlarged 2.5 times: the found hand (truly right) reads left (0.85), the hidden
+        // left hand left (0.885): the found hand is relabelled right.
+        let (side, l) = look_sides(0.150, 0.115, Side::Right, 0.7).unwrap();
+        assert_eq!(side, Side::Left);
+        assert!((l - 0.15 * 0.885).abs() < 1e-12);
+        // A closer reading of the same pair (left 0.709) favours keeping the found hand's
+        // side, and then its own side (right 0.291) is not confident enough.
+        assert_eq!(look_sides(0.150, 0.291, Side::Right, 0.7), None);
+        // 01 enlarged 0.75 times: found right (0.608), the reading left (0.858): kept.
+        assert_eq!(
+            look_sides(0.608, 0.142, Side::Left, 0.7).map(|(s, _)| s),
+            Some(Side::Left)
+        );
+        // 02 off-centre: a reading of the found (right) hand's side at 0.866 does not
+        // relabel a hand that reads right at 0.928, and its left is too weak to be taken.
+        assert_eq!(look_sides(0.928, 0.866, Side::Left, 0.7), None);
+        // Symmetric in the sides.
+        let a = look_sides(0.150, 0.115, Side::Right, 0.7).unwrap();
+        let b = look_sides(0.850, 0.885, Side::Left, 0.7).unwrap();
+        assert_eq!((a.0, b.0), (Side::Left, Side::Right));
+        assert!((a.1 - b.1).abs() < 1e-12);
     }
 
     #[test]
