@@ -99,33 +99,21 @@ const BUILD_BITT: [&str; 6] = [
 /// feature set of every registry crate as `cargo test --workspace --release`, which `cargo
 /// xtask build-check` checks in CI (see `build_check.rs`).
 fn build_bitt() -> Result<PathBuf> {
-    let bin = release_dir().join(format!("bitt{}", std::env::consts::EXE_SUFFIX));
-    if !bin.is_file() {
-        println!(
-            "xtask: building the release `bitt` binary first (about 470 crates; 10 min from \
-             an empty target folder on 2 cores, then seconds)"
-        );
-    }
-    let status = cargo().args(BUILD_BITT).status()?;
-    check(status, "building bitt")?;
-    Ok(bin)
+    build_bitt_with(
+        "release",
+        &BUILD_BITT,
+        "the release `bitt` binary first (about 470 crates; 10 min from an empty target \
+         folder on 2 cores, then seconds)",
+    )
 }
 
 /// Builds `bitt` with the `gpu` profile (Cargo.toml: the release profile with the GPU stack
 /// optimised, which the release profile leaves unoptimised to halve the first build) and
 /// returns its path. A build of its own, in `target/gpu/`.
 fn build_bitt_gpu() -> Result<PathBuf> {
-    let bin = target_dir()
-        .join("gpu")
-        .join(format!("bitt{}", std::env::consts::EXE_SUFFIX));
-    if !bin.is_file() {
-        println!(
-            "xtask: building `bitt` with the gpu profile (a build of its own: about 17 min from \
-             an empty folder on 2 cores)"
-        );
-    }
-    let status = cargo()
-        .args([
+    build_bitt_with(
+        "gpu",
+        &[
             "build",
             "--profile",
             "gpu",
@@ -133,9 +121,23 @@ fn build_bitt_gpu() -> Result<PathBuf> {
             "bitt-cli",
             "--bin",
             "bitt",
-        ])
-        .status()?;
-    check(status, "building bitt (gpu profile)")?;
+        ],
+        "`bitt` with the gpu profile (a build of its own: about 17 min from an empty folder \
+         on 2 cores)",
+    )
+}
+
+/// Runs `cargo ARGS` (which build `bitt` into the target folder's `profile_dir`), saying
+/// first that it is `building` when no binary is there yet; returns the binary's path.
+fn build_bitt_with(profile_dir: &str, args: &[&str], building: &str) -> Result<PathBuf> {
+    let bin = target_dir()
+        .join(profile_dir)
+        .join(format!("bitt{}", std::env::consts::EXE_SUFFIX));
+    if !bin.is_file() {
+        println!("xtask: building {building}");
+    }
+    let status = cargo().args(args).status()?;
+    check(status, &format!("building bitt ({profile_dir} profile)"))?;
     Ok(bin)
 }
 

@@ -1,8 +1,8 @@
 //! `results.md`: the tables in the paper's layout and which of the paper's claims hold.
 
 use super::{
-    MeanMetrics, MeshSetting, Method, MethodSummary, PhotoConsistency, PhotoMetrics, SceneResult,
-    Summary, TexelErrors,
+    MeanMetrics, MeshSetting, Method, MethodSummary, PhotoConsistency, PhotoMetrics, PhotoScores,
+    SceneResult, Summary, TexelErrors,
 };
 
 /// ` (per scene: +0.31 ± 0.20 dB, better in 3 of 4)` for the pair, or nothing.
@@ -32,6 +32,24 @@ fn fmt(v: Option<f64>, digits: usize) -> String {
 /// result is a photo scene. PSNR is given three ways: over the pixels both rendered and hand
 /// in the photo (issue 34's table), over the photo's hand mask (uncovered hand pixels count
 /// as black) and, as in the tables above, over the meshes' silhouettes.
+/// One table row per photo-scored method of each scene, from `row(training photo, method,
+/// its photo scores)`; `None` leaves the method out.
+fn photo_rows(
+    results: &[&SceneResult],
+    row: impl Fn(&str, Method, &PhotoScores) -> Option<String>,
+) -> Vec<String> {
+    results
+        .iter()
+        .flat_map(|r| {
+            let train = &r.photos.as_ref().expect("filtered").train;
+            r.methods
+                .iter()
+                .filter_map(|(method, scores)| row(train, *method, scores.photo.as_ref()?))
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
 pub fn photos_markdown(
     results: &[SceneResult],
     consistency: &[PhotoConsistency],
@@ -83,16 +101,10 @@ pub fn photos_markdown(
             }
         }
     }
-    let shade: Vec<String> = photo_results
-        .iter()
-        .flat_map(|r| {
-            let train = &r.photos.as_ref().expect("filtered").train;
-            r.methods.iter().filter_map(move |(method, scores)| {
-                let v = scores.photo?.albedo_in_shade?;
-                Some(format!("| {train} | {} | {v:.3} |\n", method.key()))
-            })
-        })
-        .collect();
+    let shade = photo_rows(&photo_results, |train, method, photo| {
+        let v = photo.albedo_in_shade?;
+        Some(format!("| {train} | {} | {v:.3} |\n", method.key()))
+    });
     if !shade.is_empty() {
         md.push_str(
             "\nAlbedo in shade: on the texels the training photo shows, the texture's mean \
@@ -102,23 +114,17 @@ pub fn photos_markdown(
         );
         md.extend(shade);
     }
-    let palm: Vec<String> = photo_results
-        .iter()
-        .flat_map(|r| {
-            let train = &r.photos.as_ref().expect("filtered").train;
-            r.methods.iter().filter_map(move |(method, scores)| {
-                let d = scores.photo?.unseen_palm?;
-                Some(format!(
-                    "| {train} | {} | {} | {:.4} | {:.4} | {:.4} |\n",
-                    method.key(),
-                    d.texels,
-                    d.invented,
-                    d.prior,
-                    d.shift
-                ))
-            })
-        })
-        .collect();
+    let palm = photo_rows(&photo_results, |train, method, photo| {
+        let d = photo.unseen_palm?;
+        Some(format!(
+            "| {train} | {} | {} | {:.4} | {:.4} | {:.4} |\n",
+            method.key(),
+            d.texels,
+            d.invented,
+            d.prior,
+            d.shift
+        ))
+    });
     if !palm.is_empty() {
         md.push_str(&format!(
             "\nUnseen palm: on the palm-side texels neither hand's training photo shows, the \
