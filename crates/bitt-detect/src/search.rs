@@ -13,14 +13,15 @@
 //! 4. **ring**: hand rectangles around each found hand (the other hand of a pair touches it),
 //!    at several rotations and sizes, scored by the landmark model's presence;
 //! 5. **look**: with one hand found, the landmark model where the hypothesis places the
-//!    other one; a reading apart from the found hand is taken as the other hand. The two
+//!    other one, starting from each reading of the found hand (crops of one hand can read
+//!    left and right); a reading apart from the found hand is taken as the other hand. The two
 //!    hands' sides are then the more likely of the two opposite assignments: a confident
 //!    reading can relabel the found hand. Otherwise the hypothesis itself is placed
 //!    (presence 0).
 //!
 //! Candidates that lie on the same hand are merged; the two hands are then the pair of
 //! distinct hands that maximises presence times the probability of each one's side, with
-//! the two sides different.
+//! the two sides different, their wrists half a palm apart and their sizes alike.
 
 use std::time::Instant;
 
@@ -65,7 +66,9 @@ pub struct SearchConfig {
     pub hypothesis_shift: f64,
     /// With one hand found, run the landmark model on the rectangle of the hypothesis (at
     /// 0.8, 1 and 1.25 of its size) before placing it: a reading whose wrist lies at least
-    /// a third of a palm from the found hand's becomes the other hand (stage `look`). The
+    /// a third of a palm from the found hand's, and that could pair with it (wrists half a
+    /// palm apart or points half a palm apart on average), becomes the other hand (stage
+    /// `look`). It starts from every reading of the found hand. The
     /// two hands take opposite sides, whichever assignment has the higher product of the
     /// two side probabilities (`look_sides`); the reading's side needs at least
     /// [`SearchConfig::look_min_side`].
@@ -77,6 +80,19 @@ pub struct SearchConfig {
     /// The hypothesis' size relative to the found hand (about its wrist): the found hand's
     /// wrist landmark tends to sit on the forearm when the other hand hides the palm.
     pub hypothesis_scale: f64,
+    /// In the choice of the pair, a hand smaller than this fraction of the largest hand's
+    /// size (the diagonal of its landmarks' box) counts in proportion to its size: a crop
+    /// collapsed onto a few fingertips is weak evidence of a hand and its side. Not a hard
+    /// limit, because a hand cut by the border down to its fingertips is such a crop too,
+    /// and the only evidence of that hand. Measured on the demo frames' copies: true pairs
+    /// 0.47-0.88 (an occluded hand shows little more than its fingers), collapsed crops
+    /// 0.32-0.34.
+    #[serde(default = "full_weight_size_default")]
+    pub full_weight_size: f64,
+}
+
+fn full_weight_size_default() -> f64 {
+    0.5
 }
 
 fn yes() -> bool {
@@ -103,6 +119,7 @@ impl Default for SearchConfig {
             look: true,
             look_min_side: look_min_side_default(),
             hypothesis_scale: 0.75,
+            full_weight_size: full_weight_size_default(),
         }
     }
 }
@@ -200,9 +217,11 @@ impl Candidate {
         ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
     }
 
-    /// Whether two candidates cannot be the two hands of a pair: their wrists are within a
-    /// third of a palm length and their points within half of one on average (the landmark
-    /// model sometimes calls the same hand left in one crop and right in another).
+    /// Whether two candidates cannot be the two hands of a pair: their wrists are within
+    /// half a palm length and their points within half of one on average (the landmark
+    /// model sometimes calls the same hand left in one crop and right in another: on `01`
+    /// rotated by 20 degrees such readings have wrists 0.38 palm apart, the demo frames'
+    /// true pairs 0.66 or more).
     fn overlaps(&self, other: &Candidate) -> bool {
         let palm = self.palm_length().max(other.palm_length()).max(1.0);
         let (a, b) = (&self.hand.points, &other.hand.points);
@@ -213,7 +232,26 @@ impl Candidate {
             .map(|(p, q)| ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt())
             .sum::<f64>()
             / NUM_LANDMARKS as f64;
-        wrist < palm / 3.0 && mean < palm * 0.5
+        wrist < palm / 2.0 && mean < palm * 0.5
+    }
+
+    /// Presence times the probability of `side`.
+    fn side_score(&self, side: Side) -> f64 {
+        self.hand.presence
+            * match side {
+                Side::Right => self.hand.right,
+                Side::Left => 1.0 - self.hand.right,
+            }
+    }
+
+    /// The weight of this candidate's evidence next to a hand of size `largest`: 1 from
+    /// `full` of that size up, in proportion to its size below (see
+    /// [`SearchConfig::full_weight_size`]).
+    fn size_weight(&self, largest: f64, full: f64) -> f64 {
+        if largest <= 0.0 {
+            return 1.0;
+        }
+        (self.size() / (full * largest)).min(1.0)
     }
 
     /// Whether two candidates lie on the same hand: their points' mean distance is under
@@ -388,25 +426,64 @@ pub fn detect_hands(
     let mut chosen = pick(&candidates, config, long);
     // 5. look
     if config.look {
+        // With one hand found, look for the other; with two, look again for a hand in place
+        // of one that is only a small crop (it weighs less than 1, `full_weight_size`), and
+        // keep whichever pair scores higher.
+        let largest = distinct(&candidates, config, long)
+            .iter()
+            .map(Candidate::size)
+            .fold(0.0, f64::max);
+        let weak = |c: &Candidate| c.size_weight(largest, config.full_weight_size) < 1.0;
         let found = match (&chosen.left, &chosen.right) {
             (Some(found), None) => Some((Side::Right, found.clone())),
             (None, Some(found)) => Some((Side::Left, found.clone())),
+            (Some(l), Some(r)) if weak(r) && !weak(l) => Some((Side::Right, l.clone())),
+            (Some(l), Some(r)) if weak(l) && !weak(r) => Some((Side::Left, r.clone())),
             _ => None,
         };
         if let Some((missing, found)) = found {
             let t = Instant::now();
             let mut runs = 0;
-            if let Some((other, side)) =
-                look(detector, image, &found, missing, config, long, &mut runs)?
-            {
-                // `side` is the reading's: the missing one, or the found hand's, which the
-                // found hand then gives up.
-                let (reading, found_slot) = match side {
-                    Side::Left => (&mut chosen.left, &mut chosen.right),
-                    Side::Right => (&mut chosen.right, &mut chosen.left),
+            // The found hand's readings: the chosen one, and any other candidate on the
+            // same place that the landmark model reads as the other side (a crop of one
+            // hand read left and another read right; `Candidate::overlaps`). The look
+            // starts from each with its own side; the likeliest reading wins.
+            let mut sources = vec![(found.clone(), missing)];
+            for c in distinct(&candidates, config, long) {
+                let side = if c.hand.right >= 0.5 {
+                    Side::Right
+                } else {
+                    Side::Left
                 };
-                *reading = Some(other);
-                *found_slot = Some(found);
+                if side == missing && c.overlaps(&found) {
+                    sources.push((c, side.mirrored()));
+                }
+            }
+            let mut best: Option<(f64, Candidate, Candidate, Side)> = None;
+            for (source, missing) in sources {
+                if let Some((score, other, side)) =
+                    look(detector, image, &source, missing, config, long, &mut runs)?
+                    && best.as_ref().is_none_or(|b| score > b.0)
+                {
+                    best = Some((score, source, other, side));
+                }
+            }
+            if let Some((_, source, other, side)) = best {
+                // `side` is the reading's; the found hand takes the other one.
+                let looked = match side {
+                    Side::Left => Chosen {
+                        left: Some(other),
+                        right: Some(source),
+                    },
+                    Side::Right => Chosen {
+                        left: Some(source),
+                        right: Some(other),
+                    },
+                };
+                let full = config.full_weight_size;
+                if chosen.missing() || looked.score(largest, full) > chosen.score(largest, full) {
+                    chosen = looked;
+                }
             }
             stages.push(StageReport {
                 stage: "look".into(),
@@ -511,10 +588,11 @@ fn hypothesis(found: &Candidate, shift: f64, k: f64) -> Candidate {
 
 /// Stage `look` ([`SearchConfig::look`]): the landmark model on the rectangle where the
 /// hypothesis places the `missing` hand, at three sizes. No tracking step: it drifts onto
-/// the found hand, which dominates such crops. Among the readings that look like a hand and
-/// have their wrist at least a third of a palm from the found hand's, each gets its side
+/// the found hand, which dominates such crops. Among the readings that look like a hand, are
+/// hand-sized next to the found hand, have their wrist at least a third of a palm from the
+/// found hand's and could pair with it (not [`Candidate::overlaps`]), each gets its side
 /// from [`look_sides`]; the best (presence times the likelihood of its assignment) is the
-/// other hand, returned with its side.
+/// other hand, returned with that score and its side.
 fn look(
     detector: &HandDetector,
     image: &RgbImage,
@@ -523,7 +601,7 @@ fn look(
     config: &SearchConfig,
     long: f64,
     runs: &mut usize,
-) -> Result<Option<(Candidate, Side)>, DetectError> {
+) -> Result<Option<(f64, Candidate, Side)>, DetectError> {
     let placed = hypothesis(found, config.hypothesis_shift, config.hypothesis_scale);
     let r = rect_from_landmarks(&placed.hand.points);
     let rects: Vec<Rect> = [0.8, 1.0, 1.25]
@@ -550,6 +628,7 @@ fn look(
             c.hand.presence >= config.min_presence
                 && c.plausible(min_size)
                 && c.wrist_distance(found) >= palm / 3.0
+                && !c.overlaps(found)
         })
         .filter_map(|c| {
             let (side, likelihood) = look_sides(
@@ -561,7 +640,7 @@ fn look(
             Some((c.hand.presence * likelihood, c, side))
         })
         .max_by(|a, b| a.0.total_cmp(&b.0));
-    Ok(best.map(|(_, c, side)| (c, side)))
+    Ok(best)
 }
 
 /// The sides of a found hand (which the search calls the side opposite `missing`) and a
@@ -714,20 +793,31 @@ impl Chosen {
     fn missing(&self) -> bool {
         self.left.is_none() || self.right.is_none()
     }
+
+    /// The pair score of [`pick`]: `presence · P(side) · size weight` summed over the hands
+    /// (the size weight relative to a hand of size `largest`, or larger if one is).
+    fn score(&self, largest: f64, full: f64) -> f64 {
+        let largest = [&self.left, &self.right]
+            .into_iter()
+            .flatten()
+            .map(Candidate::size)
+            .fold(largest, f64::max);
+        let p = |c: &Option<Candidate>, side: Side| {
+            c.as_ref()
+                .map_or(0.0, |c| c.side_score(side) * c.size_weight(largest, full))
+        };
+        p(&self.left, Side::Left) + p(&self.right, Side::Right)
+    }
 }
 
-/// The pair of distinct hands (one left, one right) with the highest
-/// `presence · P(side)` summed; a single hand when there is only one.
+/// The pair of distinct hands (one left, one right) that do not overlap with the highest
+/// `presence · P(side) · size weight` summed ([`SearchConfig::full_weight_size`]); else
+/// the hand with the highest `presence · size weight` alone.
 fn pick(candidates: &[Candidate], config: &SearchConfig, long: f64) -> Chosen {
     let hands = distinct(candidates, config, long);
-    let score = |c: &Candidate, side: Side| {
-        c.hand.presence
-            * if side == Side::Right {
-                c.hand.right
-            } else {
-                1.0 - c.hand.right
-            }
-    };
+    let largest = hands.iter().map(Candidate::size).fold(0.0, f64::max);
+    let weight = |c: &Candidate| c.size_weight(largest, config.full_weight_size);
+    let score = |c: &Candidate, side: Side| c.side_score(side) * weight(c);
     let mut best: Option<(f64, usize, usize)> = None;
     for (i, a) in hands.iter().enumerate() {
         for (j, b) in hands.iter().enumerate() {
@@ -746,7 +836,10 @@ fn pick(candidates: &[Candidate], config: &SearchConfig, long: f64) -> Chosen {
             right: Some(hands[i].clone()),
             left: Some(hands[j].clone()),
         },
-        None => match hands.first() {
+        None => match hands
+            .iter()
+            .max_by(|a, b| (a.hand.presence * weight(a)).total_cmp(&(b.hand.presence * weight(b))))
+        {
             Some(c) if c.hand.right >= 0.5 => Chosen {
                 left: None,
                 right: Some(c.clone()),
@@ -1048,6 +1141,52 @@ mod tests {
         let chosen = pick(&hands, &config, 512.0);
         assert_eq!(chosen.right.unwrap().hand.points, a.hand.points);
         assert!(chosen.left.is_some());
+    }
+
+    /// Two readings cannot be the two hands when their wrists lie within half a palm of
+    /// each other (one hand read left in one crop and right in another, as on `01` rotated
+    /// by 20 degrees, wrists 0.38 palm apart; true pairs of the demo frames' copies lie
+    /// 0.66-1.37 palm apart).
+    #[test]
+    fn pairs_need_wrists_half_a_palm_apart() {
+        let config = SearchConfig::default();
+        let palm = candidate([100.0, 200.0], 100.0, 0.9, 0.9).palm_length();
+        let right = candidate([100.0, 200.0], 100.0, 0.98, 0.9);
+        for (shift, pairs) in [(0.4, false), (0.6, true)] {
+            let left = candidate([100.0 + shift * palm, 200.0], 100.0, 0.97, 0.1);
+            let chosen = pick(&[right.clone(), left], &config, 256.0);
+            assert_eq!(!chosen.missing(), pairs, "wrists {shift} palm apart");
+        }
+    }
+
+    /// A crop collapsed onto fingertips counts in proportion to its size. Numbers read on
+    /// the Pillow copy of `01` mirrored and on a synthetic photo cut through the left hand.
+    #[test]
+    fn small_crops_weigh_less_in_the_pairing() {
+        let long = 256.0;
+        let config = SearchConfig::default();
+        let unweighted = SearchConfig {
+            full_weight_size: 0.0,
+            ..config.clone()
+        };
+        // 01 mirrored: the found hand reads left (0.63), a crop of 0.32 of its size at the
+        // other hand's fingertips left too (0.65). Unweighted, the crop wins the left side
+        // (0.920 against 0.918); weighted, the found hand is left.
+        let found = candidate([100.0, 200.0], 100.0, 0.983, 0.367);
+        let crop = candidate([250.0, 200.0], 32.0, 0.859, 0.346);
+        let hands = [found.clone(), crop];
+        let left = |c: &SearchConfig| pick(&hands, c, long).left.unwrap().hand.points;
+        assert_ne!(left(&unweighted), found.hand.points);
+        assert_eq!(left(&config), found.hand.points);
+        // A photo cut through the left hand: a right hand (0.81), the left hand's
+        // fingertips read left (0.97, 0.34 of its size) and another crop on them unsure
+        // (0.40, 0.26): the fingertips stay the left hand, the only evidence of it.
+        let right = candidate([100.0, 200.0], 100.0, 0.945, 0.806);
+        let tips = candidate([250.0, 200.0], 34.0, 0.884, 0.03);
+        let other = candidate([280.0, 200.0], 26.0, 0.837, 0.398);
+        let chosen = pick(&[right.clone(), tips.clone(), other], &config, long);
+        assert_eq!(chosen.right.unwrap().hand.points, right.hand.points);
+        assert_eq!(chosen.left.unwrap().hand.points, tips.hand.points);
     }
 
     #[test]
