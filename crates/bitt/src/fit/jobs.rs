@@ -206,7 +206,7 @@ pub fn fit_photo(
     observer: &mut dyn FitObserver,
 ) -> Result<PhotoFit, BittError> {
     check_sources(hands, prior)?;
-    let (mut pixels, [h, w], mut points, mirrored, detection) = match keypoints {
+    let (mut pixels, [h, w], mut points, mirrored, detection, placed) = match keypoints {
         PhotoKeypoints::File(source) => {
             crate::input::require_image(image)?;
             let photo = bitt_texture::image_io::load_image(image)?;
@@ -217,13 +217,14 @@ pub fn fit_photo(
                 labels_as_is: source.labels_as_is,
             };
             let points = read_keypoints(&source.path, &options)?;
-            (photo.data, [h, w], points, source.mirrored, None)
+            (photo.data, [h, w], points, source.mirrored, None, None)
         }
         PhotoKeypoints::Detected(found) => {
             found.detection.require_both(image)?;
             let files = found.files()?;
             let points = found.detection.keypoints();
-            (found.pixels, found.size, points, false, Some(files))
+            let placed = found.detection.hypothesized();
+            (found.pixels, found.size, points, false, Some(files), placed)
         }
     };
     let mut mask_pixels = match mask {
@@ -298,7 +299,16 @@ pub fn fit_photo(
                 let (Some(r), Some(span)) = (after[side as usize], points.span_px(side)) else {
                     continue;
                 };
-                if r > crate::fit::MAX_RESIDUAL_OF_SPAN * span {
+                if r > crate::fit::MAX_RESIDUAL_OF_SPAN * span && placed == Some(side) {
+                    // The hypothesis is a guess the refinement is there to correct.
+                    notes.push(format!(
+                        "the mask refinement moved the {side} hand, which the detection placed \
+                         by hypothesis, {r:.1} px on average from the placed keypoints ({:.0}% of \
+                         their span): the photo, not the guess, decided where it lies (see the \
+                         overlay)",
+                        100.0 * r / span
+                    ));
+                } else if r > crate::fit::MAX_RESIDUAL_OF_SPAN * span {
                     notes.push(format!(
                         "the mask refinement moved the {side} hand off its keypoints (it misses \
                          them by {r:.1} px on average, {:.0}% of their span): check the mask",
