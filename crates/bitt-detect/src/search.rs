@@ -426,65 +426,14 @@ pub fn detect_hands(
     let mut chosen = pick(&candidates, config, long);
     // 5. look
     if config.look {
-        // With one hand found, look for the other; with two, look again for a hand in place
-        // of one that is only a small crop (it weighs less than 1, `full_weight_size`), and
-        // keep whichever pair scores higher.
-        let largest = distinct(&candidates, config, long)
-            .iter()
-            .map(Candidate::size)
-            .fold(0.0, f64::max);
-        let weak = |c: &Candidate| c.size_weight(largest, config.full_weight_size) < 1.0;
-        let found = match (&chosen.left, &chosen.right) {
-            (Some(found), None) => Some((Side::Right, found.clone())),
-            (None, Some(found)) => Some((Side::Left, found.clone())),
-            (Some(l), Some(r)) if weak(r) && !weak(l) => Some((Side::Right, l.clone())),
-            (Some(l), Some(r)) if weak(l) && !weak(r) => Some((Side::Left, r.clone())),
-            _ => None,
-        };
-        if let Some((missing, found)) = found {
-            let t = Instant::now();
-            let mut runs = 0;
-            // The found hand's readings: the chosen one, and any other candidate on the
-            // same place that the landmark model reads as the other side (a crop of one
-            // hand read left and another read right; `Candidate::overlaps`). The look
-            // starts from each with its own side; the likeliest reading wins.
-            let mut sources = vec![(found.clone(), missing)];
-            for c in distinct(&candidates, config, long) {
-                let side = if c.hand.right >= 0.5 {
-                    Side::Right
-                } else {
-                    Side::Left
-                };
-                if side == missing && c.overlaps(&found) {
-                    sources.push((c, side.mirrored()));
-                }
-            }
-            let mut best: Option<(f64, Candidate, Candidate, Side)> = None;
-            for (source, missing) in sources {
-                if let Some((score, other, side)) =
-                    look(detector, image, &source, missing, config, long, &mut runs)?
-                    && best.as_ref().is_none_or(|b| score > b.0)
-                {
-                    best = Some((score, source, other, side));
-                }
-            }
-            if let Some((_, source, other, side)) = best {
-                // `side` is the reading's; the found hand takes the other one.
-                let looked = match side {
-                    Side::Left => Chosen {
-                        left: Some(other),
-                        right: Some(source),
-                    },
-                    Side::Right => Chosen {
-                        left: Some(source),
-                        right: Some(other),
-                    },
-                };
-                let full = config.full_weight_size;
-                if chosen.missing() || looked.score(largest, full) > chosen.score(largest, full) {
-                    chosen = looked;
-                }
-            }
+        let t = Instant::now();
+        let mut runs = 0;
+        let hands = distinct(&candidates, config, long);
+        let looked = look_stage(&chosen, &hands, config, |source, missing| {
+            look(detector, image, source, missing, config, long, &mut runs)
+        })?;
+        if let Some(looked) = looked {
+            chosen = looked;
             stages.push(StageReport {
                 stage: "look".into(),
                 palm_runs: 0,
@@ -546,6 +495,74 @@ pub fn detect_hands(
         best_presence,
         config: config.clone(),
     })
+}
+
+/// Stage `look` around [`look`] (passed in as `look`, so the choice is testable without the
+/// networks): with one hand chosen, look for the other; with two, look again for a hand in
+/// place of one that is only a small crop (it weighs less than 1,
+/// [`SearchConfig::full_weight_size`]), and keep whichever pair scores higher
+/// ([`Chosen::score`]). The look starts from every reading of the found hand: the chosen
+/// one, and any other of the distinct `hands` on the same place that the landmark model
+/// reads as the other side (one hand read left in one crop and right in another;
+/// [`Candidate::overlaps`]), each with its own side; the likeliest reading wins.
+///
+/// Returns the new choice, or `None` when the stage did not run.
+fn look_stage(
+    chosen: &Chosen,
+    hands: &[Candidate],
+    config: &SearchConfig,
+    mut look: impl FnMut(&Candidate, Side) -> Result<Option<(f64, Candidate, Side)>, DetectError>,
+) -> Result<Option<Chosen>, DetectError> {
+    let largest = hands.iter().map(Candidate::size).fold(0.0, f64::max);
+    let weak = |c: &Candidate| c.size_weight(largest, config.full_weight_size) < 1.0;
+    let (missing, found) = match (&chosen.left, &chosen.right) {
+        (Some(found), None) => (Side::Right, found),
+        (None, Some(found)) => (Side::Left, found),
+        (Some(l), Some(r)) if weak(r) && !weak(l) => (Side::Right, l),
+        (Some(l), Some(r)) if weak(l) && !weak(r) => (Side::Left, r),
+        _ => return Ok(None),
+    };
+    let mut sources = vec![(found.clone(), missing)];
+    for c in hands {
+        let side = if c.hand.right >= 0.5 {
+            Side::Right
+        } else {
+            Side::Left
+        };
+        if side == missing && c.overlaps(found) {
+            sources.push((c.clone(), side.mirrored()));
+        }
+    }
+    let mut best: Option<(f64, Candidate, Candidate, Side)> = None;
+    for (source, missing) in sources {
+        if let Some((score, other, side)) = look(&source, missing)?
+            && best.as_ref().is_none_or(|b| score > b.0)
+        {
+            best = Some((score, source, other, side));
+        }
+    }
+    let Some((_, source, other, side)) = best else {
+        return Ok(Some(chosen.clone()));
+    };
+    // `side` is the reading's; the hand it started from takes the other one.
+    let looked = match side {
+        Side::Left => Chosen {
+            left: Some(other),
+            right: Some(source),
+        },
+        Side::Right => Chosen {
+            left: Some(source),
+            right: Some(other),
+        },
+    };
+    let full = config.full_weight_size;
+    Ok(Some(
+        if chosen.missing() || looked.score(largest, full) > chosen.score(largest, full) {
+            looked
+        } else {
+            chosen.clone()
+        },
+    ))
 }
 
 /// The other hand of an interlocked pair, placed from the found one (see
@@ -784,6 +801,7 @@ fn distinct(candidates: &[Candidate], config: &SearchConfig, long_side: f64) -> 
         .collect()
 }
 
+#[derive(Clone)]
 struct Chosen {
     left: Option<Candidate>,
     right: Option<Candidate>,
@@ -1187,6 +1205,86 @@ mod tests {
         let chosen = pick(&[right.clone(), tips.clone(), other], &config, long);
         assert_eq!(chosen.right.unwrap().hand.points, right.hand.points);
         assert_eq!(chosen.left.unwrap().hand.points, tips.hand.points);
+    }
+
+    /// The look stage's choice, with the landmark model replaced by canned readings.
+    #[test]
+    fn the_look_starts_from_every_reading_and_replaces_only_a_weaker_partner() {
+        let config = SearchConfig::default();
+        let palm = candidate([100.0, 200.0], 100.0, 0.9, 0.9).palm_length();
+        let no_look = |_: &Candidate, _: Side| -> Result<_, DetectError> { Ok(None) };
+        // Two full hands: the stage does not run.
+        let right = candidate([100.0, 200.0], 100.0, 0.98, 0.9);
+        let left = candidate([300.0, 200.0], 100.0, 0.97, 0.1);
+        let both = Chosen {
+            left: Some(left.clone()),
+            right: Some(right.clone()),
+        };
+        assert!(
+            look_stage(&both, &[right, left], &config, no_look)
+                .unwrap()
+                .is_none()
+        );
+
+        // 01 rotated 20: one hand read left (0.96) and, 0.38 palm away, right (0.72). The
+        // left reading was chosen; the look from it finds nothing, from the right one it
+        // finds the hidden left hand.
+        let read_left = candidate([100.0, 200.0], 100.0, 0.99, 0.04);
+        let read_right = candidate([100.0 + 0.38 * palm, 200.0], 100.0, 0.96, 0.72);
+        let hidden = candidate([250.0, 200.0], 100.0, 0.94, 0.12);
+        let chosen = Chosen {
+            left: Some(read_left.clone()),
+            right: None,
+        };
+        let mut starts = Vec::new();
+        let looked = look_stage(
+            &chosen,
+            &[read_left.clone(), read_right.clone()],
+            &config,
+            |source, missing| {
+                starts.push((source.hand.right, missing));
+                Ok((missing == Side::Left).then(|| (0.6, hidden.clone(), Side::Left)))
+            },
+        )
+        .unwrap()
+        .unwrap();
+        assert_eq!(starts, [(0.04, Side::Right), (0.72, Side::Left)]);
+        assert_eq!(looked.right.unwrap().hand.points, read_right.hand.points);
+        assert_eq!(looked.left.unwrap().hand.points, hidden.hand.points);
+
+        // A partner that is a small crop (0.32 of the found hand's size) is replaced by a
+        // full-sized reading (01 mirrored) ...
+        let found = candidate([100.0, 200.0], 100.0, 0.983, 0.367);
+        let crop = candidate([250.0, 200.0], 32.0, 0.859, 0.346);
+        let reading = candidate([260.0, 200.0], 90.0, 0.71, 0.92);
+        let chosen = Chosen {
+            left: Some(found.clone()),
+            right: Some(crop.clone()),
+        };
+        let hands = [found.clone(), crop.clone()];
+        let looked = look_stage(&chosen, &hands, &config, |_, _| {
+            Ok(Some((0.4, reading.clone(), Side::Right)))
+        })
+        .unwrap()
+        .unwrap();
+        assert_eq!(looked.right.unwrap().hand.points, reading.hand.points);
+        assert_eq!(looked.left.unwrap().hand.points, found.hand.points);
+        // ... but not by a reading whose pair scores lower (the cut photo: a second reading
+        // of the right hand, read right, would relabel it left).
+        let right = candidate([100.0, 200.0], 100.0, 0.945, 0.806);
+        let tips = candidate([250.0, 200.0], 34.0, 0.884, 0.03);
+        let again = candidate([100.0 + 0.52 * palm, 200.0], 100.0, 0.9, 0.9);
+        let chosen = Chosen {
+            left: Some(tips.clone()),
+            right: Some(right.clone()),
+        };
+        let looked = look_stage(&chosen, &[right.clone(), tips.clone()], &config, |_, _| {
+            Ok(Some((0.16, again.clone(), Side::Right)))
+        })
+        .unwrap()
+        .unwrap();
+        assert_eq!(looked.right.unwrap().hand.points, right.hand.points);
+        assert_eq!(looked.left.unwrap().hand.points, tips.hand.points);
     }
 
     #[test]
