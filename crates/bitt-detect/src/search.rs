@@ -10,6 +10,8 @@
 //!    rectangle its own landmarks give (MediaPipe's tracking step) until it settles;
 //! 3. **masked**: with the hands found so far painted black, the palm detector again: a hand
 //!    hidden behind a more confident one becomes the best palm;
+//! 3. (b) **whole**: with no hand found yet, the landmark model on centred squares of the
+//!    whole photo, at four quarter turns, then the tracking steps;
 //! 4. **ring**: hand rectangles around each found hand (the other hand of a pair touches it),
 //!    at several rotations and sizes, scored by the landmark model's presence;
 //! 5. **look**: with one hand found, the landmark model where the hypothesis places the
@@ -46,6 +48,14 @@ pub struct SearchConfig {
     pub tracking_steps: usize,
     /// Run the masked second palm pass.
     pub masked_pass: bool,
+    /// When no stage before it found a hand, run the landmark model on the whole photo:
+    /// centred squares of its long side and of 0.75 of it, upright and turned by 90, 180 and
+    /// 270 degrees, each followed by the tracking steps (stage `whole`). BiTT's photos are
+    /// of two hands that fill the frame; in noisy or heavily compressed copies of the demo
+    /// frames the palm detector scores their palms under 0.1 (0.055 in `01` saved as a
+    /// JPEG of quality 25) while the landmark model still reads them.
+    #[serde(default = "yes")]
+    pub whole_photo: bool,
     /// Run the ring of hand rectangles around a found hand (off by default: on the demo
     /// frames it costs 2.4 s and finds no hand the other stages miss; `docs/detection.md`).
     pub ring: bool,
@@ -110,6 +120,7 @@ impl Default for SearchConfig {
             min_presence: 0.5,
             tracking_steps: 2,
             masked_pass: true,
+            whole_photo: true,
             ring: false,
             ring_rotations: vec![0.0, 45.0, 90.0, 135.0, 180.0, 225.0, 270.0, 315.0],
             min_hand_size: 0.08,
@@ -138,7 +149,7 @@ pub struct DetectedHand {
     pub side_probability: f64,
     /// The palm detector's score of the palm it started from (`None` for the ring stage).
     pub palm_score: Option<f64>,
-    /// The stage that found it: `palms`, `masked`, `ring`, `look` or `hypothesis`.
+    /// The stage that found it: `palms`, `masked`, `whole`, `ring`, `look` or `hypothesis`.
     pub stage: String,
     /// The crop the final landmarks came from.
     pub rect: Rect,
@@ -147,7 +158,7 @@ pub struct DetectedHand {
 /// What one stage of the search did.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StageReport {
-    /// `palms`, `masked`, `ring`, `look` or `hypothesis`.
+    /// `palms`, `masked`, `whole`, `ring`, `look` or `hypothesis`.
     pub stage: String,
     /// Palm detector inputs run.
     pub palm_runs: usize,
@@ -381,6 +392,38 @@ pub fn detect_hands(
             config,
             t,
         ));
+    }
+
+    // 3b. whole
+    if config.whole_photo
+        && pick(&candidates, config, long).left.is_none()
+        && pick(&candidates, config, long).right.is_none()
+    {
+        let t = Instant::now();
+        let mut rects = Vec::new();
+        for scale in [1.0, 0.75] {
+            for quarter in 0..4 {
+                rects.push(Rect {
+                    center: [w as f64 / 2.0, h as f64 / 2.0],
+                    size: [long * scale, long * scale],
+                    rotation: normalize_angle(quarter as f64 * std::f64::consts::FRAC_PI_2),
+                });
+            }
+        }
+        let mut runs = rects.len();
+        let seeds: Vec<Candidate> = detector
+            .landmarks(image, &rects)?
+            .into_iter()
+            .filter(|l| l.presence >= config.min_presence)
+            .map(|hand| Candidate {
+                first_crop: hand.rect.size[0],
+                hand,
+                palm_score: None,
+                stage: "whole",
+            })
+            .collect();
+        candidates.extend(refine(detector, image, seeds, config, &mut runs)?);
+        stages.push(report(long, "whole", 0, runs, &candidates, config, t));
     }
 
     // 4. ring

@@ -118,6 +118,39 @@ fn variants(img: &RgbImage) -> Vec<Variant> {
             mirrored: false,
         });
     }
+    // Degraded copies: Gaussian noise (sigma 12 of 255, a fixed generator) and a JPEG of
+    // quality 25; the palm detector scores the palms of these under its threshold, and the
+    // whole-photo stage finds the hands.
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut uniform = move || {
+        state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    };
+    let mut noisy = img.clone();
+    for p in noisy.pixels_mut() {
+        for c in p.0.iter_mut() {
+            let g = (-2.0 * uniform().ln()).sqrt() * (std::f64::consts::TAU * uniform()).cos();
+            *c = (*c as f64 + 12.0 * g).round().clamp(0.0, 255.0) as u8;
+        }
+    }
+    out.push(Variant {
+        name: "noise 12",
+        image: noisy,
+        map: Box::new(|p| p),
+        mirrored: false,
+    });
+    let mut jpeg = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 25)
+        .encode_image(img)
+        .expect("jpeg");
+    out.push(Variant {
+        name: "jpeg 25",
+        image: image::load_from_memory(&jpeg).expect("jpeg").to_rgb8(),
+        map: Box::new(|p| p),
+        mirrored: false,
+    });
     out
 }
 
@@ -191,15 +224,30 @@ fn demo_frames_give_both_hands_of_the_right_sides() {
             }
         }
     }
-    assert!(failures.is_empty(), "misses: {failures:#?}");
-    // Both hands detected, on the right sides, in 7 of the 14 copies: three of them (01
+    // Known miss (docs/detection.md, "Limits"): with noise on 02 the palms stage finds
+    // nothing, and of the whole-photo stage's two readings the one read left lies between
+    // the hands, nearer the right one's wrist and middle base (70 px against 84 px). The list
+    // is exact, so a fix (or a new miss) shows.
+    let known = ["02 noise 12"];
+    let missed: Vec<&String> = failures
+        .iter()
+        .filter(|f| !known.iter().any(|k| f.starts_with(&format!("{k}:"))))
+        .collect();
+    assert!(missed.is_empty(), "new misses: {missed:#?}");
+    assert_eq!(
+        failures.len(),
+        known.len(),
+        "fewer misses than known: {failures:#?}"
+    );
+    // Both hands detected, on the right sides, in 9 of the 18 copies (7 of the 14 geometric
+    // ones, and 01 with noise and as a JPEG): three of them (01
     // resized 0.75, off-centre, rotated -20) get their left hand from the look stage,
     // which the hypothesis placed before it; in 01 resized 2.5 the look stage finds the
     // left hand and relabels the found one right; in 01 rotated 20 two crops of the right
     // hand read left (0.96) and right (0.72) with wrists 0.38 palm apart, too close to be
     // a pair, and the look stage, started from the right reading, finds the left hand.
     assert!(
-        both_detected >= 7,
+        both_detected >= 9,
         "both hands detected in {both_detected} copies"
     );
 }
