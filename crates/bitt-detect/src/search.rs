@@ -395,10 +395,7 @@ pub fn detect_hands(
     }
 
     // 3b. whole
-    if config.whole_photo
-        && pick(&candidates, config, long).left.is_none()
-        && pick(&candidates, config, long).right.is_none()
-    {
+    if config.whole_photo && distinct(&candidates, config, long).is_empty() {
         let t = Instant::now();
         let mut rects = Vec::new();
         for scale in [1.0, 0.75] {
@@ -410,19 +407,11 @@ pub fn detect_hands(
                 });
             }
         }
-        let mut runs = rects.len();
-        let seeds: Vec<Candidate> = detector
-            .landmarks(image, &rects)?
-            .into_iter()
-            .filter(|l| l.presence >= config.min_presence)
-            .map(|hand| Candidate {
-                first_crop: hand.rect.size[0],
-                hand,
-                palm_score: None,
-                stage: "whole",
-            })
-            .collect();
-        candidates.extend(refine(detector, image, seeds, config, &mut runs)?);
+        let mut runs = 0;
+        let min = config.min_presence;
+        candidates.extend(read_tracked(
+            detector, image, &rects, min, "whole", config, &mut runs,
+        )?);
         stages.push(report(long, "whole", 0, runs, &candidates, config, t));
     }
 
@@ -446,19 +435,11 @@ pub fn detect_hands(
                 }
             }
         }
-        let mut runs = rects.len();
-        let first = detector.landmarks(image, &rects)?;
-        let seeds: Vec<Candidate> = first
-            .into_iter()
-            .filter(|l| l.presence >= config.min_presence * 0.5)
-            .map(|hand| Candidate {
-                first_crop: hand.rect.size[0],
-                hand,
-                palm_score: None,
-                stage: "ring",
-            })
-            .collect();
-        candidates.extend(refine(detector, image, seeds, config, &mut runs)?);
+        let mut runs = 0;
+        let min = config.min_presence * 0.5;
+        candidates.extend(read_tracked(
+            detector, image, &rects, min, "ring", config, &mut runs,
+        )?);
         stages.push(report(long, "ring", 0, runs, &candidates, config, t));
     }
 
@@ -765,6 +746,32 @@ fn track(
             first_crop: hand.rect.size[0],
             hand,
             palm_score: Some(p.score),
+            stage,
+        })
+        .collect();
+    refine(detector, image, seeds, config, runs)
+}
+
+/// The landmark model on `rects` (no palm behind them), the readings with at least
+/// `min_presence` kept as candidates of `stage`, then the tracking steps ([`refine`]).
+fn read_tracked(
+    detector: &HandDetector,
+    image: &RgbImage,
+    rects: &[Rect],
+    min_presence: f64,
+    stage: &'static str,
+    config: &SearchConfig,
+    runs: &mut usize,
+) -> Result<Vec<Candidate>, DetectError> {
+    *runs += rects.len();
+    let seeds = detector
+        .landmarks(image, rects)?
+        .into_iter()
+        .filter(|l| l.presence >= min_presence)
+        .map(|hand| Candidate {
+            first_crop: hand.rect.size[0],
+            hand,
+            palm_score: None,
             stage,
         })
         .collect();
