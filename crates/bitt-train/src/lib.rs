@@ -6,6 +6,8 @@
 //! - [`pipeline`]: the forward pass (scene estimation, coarse stage, fine stage).
 //! - [`losses`]: the paper's loss (eq. 6-10).
 //! - [`optim`], [`checkpoint`], [`trainer`]: Adam, checkpoints, the per-scene trainer.
+//! - [`light_search`]: a real photo's light location, chosen from the view's image before
+//!   training.
 //!
 //! This crate knows one training view and its networks. It never knows photos, detectors,
 //! keypoint fits, mesh refinement, run folders, reports or evaluation protocols: those are
@@ -24,6 +26,7 @@ pub mod assets;
 pub mod checkpoint;
 pub mod config;
 mod error;
+pub mod light_search;
 pub mod losses;
 pub mod optim;
 pub mod pipeline;

@@ -36,6 +36,12 @@ pub struct TrainingView {
     /// [`LightParams::one_colour`] (`loss.photo_light`, real photos only). `false`: the
     /// paper's three light colours.
     pub one_colour_light: bool,
+    /// Where the forward pass holds the point light (camera frame, metres) instead of the
+    /// light network's location; the network still estimates the colours. `None`: the
+    /// network's location, as the paper does. Real photos set it from
+    /// [`Trainer::search_light_location`](crate::trainer::Trainer::search_light_location)
+    /// (`loss.photo_light_search`).
+    pub light_location: Option<[f32; 3]>,
 }
 
 impl TrainingView {
@@ -116,6 +122,7 @@ impl TrainingView {
             image,
             weight: None,
             one_colour_light: false,
+            light_location: None,
             mask,
             hand_image,
             plans,
@@ -307,11 +314,17 @@ pub fn forward(
     let with_consistency = consistency != Consistency::Off;
     let [_, _, h, w] = view.image.dims();
     let light = nets.light.predict(view.image.clone());
-    let light = point_light(&if view.one_colour_light {
+    let mut light = point_light(&if view.one_colour_light {
         light.one_colour()
     } else {
         light
     });
+    if let Some(location) = view.light_location {
+        light.location = Tensor::from_data(
+            TensorData::new(location.to_vec(), [3]),
+            &light.location.device(),
+        );
+    }
     let coeffs = nets.html.predict(view.hand_image.clone());
     let t = assets.num_texels();
     let coarse_both = pca.textures(Tensor::cat(

@@ -818,3 +818,58 @@ fn occlusion_darkens_creases_and_follows_the_training_view() {
         .to_string();
     assert!(e.contains("occlusion strength"), "{e}");
 }
+
+/// The real-photo light search (`bitt_train::light_search`, issue 34): a photo shaded by the
+/// prior's mean texture under a light at a grid location is explained best by that
+/// location, whichever of several it is; the forward pass then holds the light there while
+/// the network still gives the colours.
+#[test]
+fn the_light_search_finds_the_location_that_shaded_the_photo() {
+    use bitt_train::light_search::REACH;
+    let (config, scene, pca) = tiny();
+    let device = Device::flex().autodiff();
+    let mut t = synthetic_trainer(&scene, &config, &pca, &device).unwrap();
+    let s = config.nets.image_size;
+    let k = t.pca.basis.dims()[1];
+    let mean = bitt_stdx::to_host(
+        t.pca
+            .textures(burn::tensor::Tensor::zeros([1, k], &t.pca.mean.device()))
+            .inner(),
+    )
+    .unwrap();
+    let hands = t.view.geometry.hands.clone().expect("posed from hands");
+    for target in [
+        [REACH, -REACH, 0.0],
+        [-REACH, 0.0, -REACH],
+        [0.0, REACH, REACH],
+    ] {
+        let light = bitt_render::scene::LightValues {
+            ambient: [0.3, 0.25, 0.2],
+            diffuse: [0.6, 0.5, 0.4],
+            specular: [0.0; 3],
+            location: target,
+        };
+        let photo = crate::evaluate::render_view(&t, &hands, &[mean.clone(), mean.clone()], &light)
+            .unwrap();
+        t.view.image = burn::tensor::Tensor::from_data(
+            burn::tensor::TensorData::new(photo, [1, 3, s, s]),
+            &device,
+        );
+        let found = t.search_light_location().unwrap();
+        assert_eq!(found.location, target, "{:?}", found.candidates);
+        assert_eq!(found.candidates.len(), 26);
+        let (_, best) = found.candidates.iter().find(|(c, _)| *c == target).unwrap();
+        assert!(*best < 1e-4, "the shading location leaves {best}");
+        assert!(found.pixels > 50, "{} pixels", found.pixels);
+    }
+    // Held in the forward pass.
+    t.view.light_location = Some([REACH, -REACH, -REACH]);
+    let outputs = t.forward().unwrap();
+    let location = bitt_stdx::to_host(outputs.light.location.clone().inner()).unwrap();
+    assert_eq!(location, vec![REACH, -REACH, -REACH]);
+    let ambient = bitt_stdx::to_host(outputs.light.ambient.clone().inner()).unwrap();
+    assert!(
+        ambient.iter().all(|&a| (0.2..=1.0).contains(&a)),
+        "{ambient:?}"
+    );
+}
