@@ -304,6 +304,24 @@ fn annotation_run_trains_resumes_and_renders_in_other_poses() {
     ] {
         assert!(run.join(f).is_file(), "{f} missing");
     }
+    // The light's location was chosen from the photo, the same on resuming, and light.json
+    // says so.
+    let searched = setup
+        .trainer
+        .view
+        .light_location
+        .expect("searched for a photo");
+    assert_eq!(resumed.view.light_location, Some(searched));
+    let light_file: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("light.json")).unwrap()).unwrap();
+    assert!(
+        light_file["location_from"]
+            .as_str()
+            .is_some_and(|s| s.contains("photo")),
+        "{light_file}"
+    );
+    let location: Vec<f32> = serde_json::from_value(light_file["location"].clone()).unwrap();
+    assert_eq!(location, searched.to_vec());
     // The saved avatar renders the training view as the trainer does.
     let avatar = RealAvatar::load(&run).unwrap();
     let assets = avatar.assets().unwrap();

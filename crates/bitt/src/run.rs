@@ -340,7 +340,10 @@ pub fn write_run(
         layout.num_texels(),
         s,
     )?;
-    write_json(&dir.join(files::LIGHT), &light_json(&avatar.light))?;
+    write_json(
+        &dir.join(files::LIGHT),
+        &light_json(&avatar.light, trainer.view.light_location.is_some()),
+    )?;
 
     // The avatar, posed as in the input.
     let images = [
@@ -533,13 +536,21 @@ fn score_synthetic(
     })
 }
 
-fn light_json(l: &LightValues) -> serde_json::Value {
+/// `light.json`: the light, its frame, and where its location came from (`searched`: chosen
+/// from the photo before training, `bitt_train::light_search`; else the light network's).
+fn light_json(l: &LightValues, searched: bool) -> serde_json::Value {
+    let location_from = if searched {
+        "the photo's shading, chosen before training and held (loss.photo_light_search)"
+    } else {
+        "the light network"
+    };
     serde_json::json!({
         "ambient": l.ambient,
         "diffuse": l.diffuse,
         "specular": l.specular,
         "location": l.location,
         "frame": "training camera (metres; x right, y down, z forward)",
+        "location_from": location_from,
     })
 }
 

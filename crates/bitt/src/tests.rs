@@ -581,6 +581,14 @@ fn a_trained_runs_avatar_is_rigged_and_valid_gltf() {
     let (t, scene, dir) = written_one_iteration_run("avatar");
     let glb = std::fs::read(dir.join("avatar.glb")).unwrap();
     assert!(dir.join("avatar_static.glb").is_file());
+    // A synthetic scene keeps the paper's light: its location is the network's.
+    let light: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("light.json")).unwrap()).unwrap();
+    assert_eq!(light["location_from"], "the light network", "{light}");
+    assert!(
+        crate::files::read_light(&dir).is_ok(),
+        "light.json still reads as a light"
+    );
 
     // The JSON chunk of the container.
     let len = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
