@@ -36,9 +36,10 @@ pub enum ConvImpl {
     ShiftedSum,
     /// burn's `conv1d` (reference; slow on CPU at BTR's sizes).
     Burn,
-    /// As [`ConvImpl::ShiftedSum`], and inside BTR's ResNet blocks the convolution, group
-    /// norm and SiLU run as one custom operation with a hand-written backward pass when the
-    /// tensors live on flex (the CPU default; see `fused`). The default.
+    /// When the tensors live on flex (the CPU default; see `fused`): inside BTR's ResNet blocks
+    /// the convolution, group norm and SiLU run as one custom operation with a hand-written
+    /// backward pass, and a plain convolution plus bias as another; elsewhere as
+    /// [`ConvImpl::ShiftedSum`]. The default.
     Fused,
 }
 
@@ -113,6 +114,12 @@ impl TexelConv {
                 ConvOptions::new([1], [pad], [1], 1),
             );
         }
+        if self.implementation == ConvImpl::Fused
+            && let Some(y) =
+                crate::fused::conv_bias::conv_bias(&x, &self.weight.val(), &self.bias.val())
+        {
+            return y;
+        }
         self.forward_without_bias(x) + self.bias.val().reshape([1, c_out, 1])
     }
 
@@ -174,7 +181,12 @@ mod tests {
             let ad = device.clone().autodiff();
             for &(c_in, c_out, k, t) in &[(3, 8, 3, 11), (5, 4, 1, 7), (4, 6, 3, 1), (2, 3, 5, 9)] {
                 let mut reference: Option<[Vec<f32>; 4]> = None;
-                for implementation in [ConvImpl::Burn, ConvImpl::Im2col, ConvImpl::ShiftedSum] {
+                for implementation in [
+                    ConvImpl::Burn,
+                    ConvImpl::Im2col,
+                    ConvImpl::ShiftedSum,
+                    ConvImpl::Fused,
+                ] {
                     let conv = TexelConvConfig::new(c_in, c_out, k)
                         .with_implementation(implementation)
                         .init(&ad);

@@ -15,11 +15,15 @@
 //! composes burn operations, which compute the same function. Tests compare both, values and
 //! gradients, and the kernels against naive loops and finite differences.
 //!
+//! [`conv_bias`] is the same mechanism for BTR's convolutions without a normalisation (the
+//! residual path's 1x1 projections and the head).
+//!
 //! [`conv2d`] is the same mechanism for the image networks (albedo U-Net, light and HTML
 //! encoders): `act(InstanceNorm(conv2d(x) + bias))` as one operation, tiled im2col + GEMM
 //! and row passes in [`kernels2d`].
 
 pub(crate) mod conv2d;
+pub(crate) mod conv_bias;
 mod gemm;
 pub(crate) mod kernels;
 pub(crate) mod kernels2d;
