@@ -17,15 +17,14 @@ use std::sync::Arc;
 
 use burn::backend::Flex;
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
-use burn::backend::autodiff::checkpoint::strategy::NoCheckpointing;
 use burn::backend::autodiff::grads::Gradients;
-use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::autodiff::ops::{Backward, Ops};
 use burn::backend::flex::FlexTensor;
 use burn::tensor::{DType, Tensor};
 use rayon::prelude::*;
 
 use super::kernels::{self, ConvDims};
-use super::{FlexAutodiff, contiguous, flex_tensor, values};
+use super::{FlexAutodiff, autodiff_output, contiguous, flex_tensor, values};
 
 /// `conv(x) + bias` ("same" zero padding, stride 1) on flex; `None` (nothing computed) on
 /// other backends or dtypes.
@@ -54,15 +53,8 @@ pub(crate) fn conv_bias(x: &Tensor<3>, weight: &Tensor<3>, bias: &Tensor<1>) -> 
             return None;
         }
         let (y, saved) = forward(xa.primitive(), w.primitive(), b.primitive(), d);
-        let out = match ConvBiasBackward
-            .prepare::<NoCheckpointing>([xa.node(), w.node(), b.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(prep) => prep.finish(saved, y),
-            OpsKind::UnTracked(prep) => prep.finish(y),
-        };
-        return Some(Tensor::from_primitive::<FlexAutodiff>(out));
+        let nodes = [xa.node(), w.node(), b.node()];
+        return Some(autodiff_output(ConvBiasBackward, nodes, saved, y));
     }
     let xf = x.clone().try_into_primitive::<Flex>().ok()?;
     let wf = weight.clone().try_into_primitive::<Flex>().ok()?;

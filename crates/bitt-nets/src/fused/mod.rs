@@ -38,7 +38,7 @@ use burn::backend::autodiff::NodeId;
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::NoCheckpointing;
 use burn::backend::autodiff::grads::Gradients;
-use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::autodiff::ops::{Backward, NodeGuard, Ops, OpsKind};
 use burn::backend::flex::FlexTensor;
 use burn::tensor::{DType, Tensor, TensorData};
 
@@ -132,15 +132,7 @@ fn run_on_flex<const DX: usize, const DW: usize, const DY: usize, Op: Backward<F
             xa.primitive(),
             [&weight, &bias, &gamma, &beta].map(|t| t.primitive()),
         );
-        let out = match op
-            .prepare::<NoCheckpointing>(nodes)
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(prep) => prep.finish(saved, y),
-            OpsKind::UnTracked(prep) => prep.finish(y),
-        };
-        return Some(Tensor::from_primitive::<FlexAutodiff>(out));
+        return Some(autodiff_output(op, nodes, saved, y));
     }
     let xf = x.clone().try_into_primitive::<Flex>().ok()?;
     let [weight, bias, gamma, beta] = [
@@ -154,6 +146,25 @@ fn run_on_flex<const DX: usize, const DW: usize, const DY: usize, Op: Backward<F
     }
     let (y, _) = forward(&xf, [&weight, &bias, &gamma, &beta]);
     Some(Tensor::from_primitive::<Flex>(y))
+}
+
+/// The output `y` of a fused operation on flex with autodiff, with `op` registered as its
+/// backward pass (keeping `state`) when one of the inputs behind `nodes` is tracked.
+fn autodiff_output<const N: usize, const D: usize, Op: Backward<Flex, N>>(
+    op: Op,
+    nodes: [NodeGuard; N],
+    state: Op::State,
+    y: FlexTensor,
+) -> Tensor<D> {
+    let out = match op
+        .prepare::<NoCheckpointing>(nodes)
+        .compute_bound()
+        .stateful()
+    {
+        OpsKind::Tracked(prep) => prep.finish(state, y),
+        OpsKind::UnTracked(prep) => prep.finish(y),
+    };
+    Tensor::from_primitive::<FlexAutodiff>(out)
 }
 
 /// The output gradient of a fused operation as a writable buffer for `dz`: the gradient's

@@ -12,14 +12,13 @@
 
 use burn::backend::Flex;
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
-use burn::backend::autodiff::checkpoint::strategy::NoCheckpointing;
 use burn::backend::autodiff::grads::Gradients;
-use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::autodiff::ops::{Backward, Ops};
 use burn::backend::flex::FlexTensor;
 use burn::tensor::{DType, Tensor};
 use rayon::prelude::*;
 
-use super::{FlexAutodiff, contiguous, flex_tensor};
+use super::{FlexAutodiff, autodiff_output, contiguous, flex_tensor};
 
 /// Max pooling with window and stride 2 along the last axis, on flex; `None` (nothing
 /// computed) on other backends or dtypes.
@@ -42,15 +41,12 @@ pub(crate) fn max_pool_half(x: &Tensor<3>) -> Option<Tensor<3>> {
             return None;
         }
         let (y, picks) = forward(xa.primitive(), dims);
-        let out = match MaxPoolHalfBackward
-            .prepare::<NoCheckpointing>([xa.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(prep) => prep.finish((picks, dims), y),
-            OpsKind::UnTracked(prep) => prep.finish(y),
-        };
-        return Some(Tensor::from_primitive::<FlexAutodiff>(out));
+        return Some(autodiff_output(
+            MaxPoolHalfBackward,
+            [xa.node()],
+            (picks, dims),
+            y,
+        ));
     }
     let xf = x.clone().try_into_primitive::<Flex>().ok()?;
     if xf.dtype() != DType::F32 {
