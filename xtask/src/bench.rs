@@ -156,7 +156,9 @@ fn net_vs_torch(net: &str, args: &[String]) -> Result<()> {
         println!(
             "  torch: NOT AVAILABLE: `{} -c 'import torch'` failed, so there is no baseline \
              and no ratio (install: pip install torch --index-url \
-             https://download.pytorch.org/whl/cpu)",
+             https://download.pytorch.org/whl/cpu, or where that index is unreachable the \
+             PyPI wheel, pip install torch; then BITT_PYTHON names its python if it is not \
+             python3)",
             python()
         );
         return Ok(());

@@ -395,11 +395,15 @@ fn refinement_moves_perturbed_meshes_towards_the_truth_deterministically() {
     };
     let scene = generate_scene(&synth, 11, &Device::flex()).expect("scene");
     let pca = texture_prior(&config, None, &Device::flex()).expect("pca");
-    let refine = RefineConfig {
+    // Without the holes term: over 100 iterations its hole pixels, which come and go as the
+    // meshes move, make the end point erratic (docs/refinement.md, Holes), and this test
+    // compares backends.
+    let mut refine = RefineConfig {
         rigid_iterations: 20,
         full_iterations: 80,
         ..RefineConfig::default()
     };
+    refine.weights.holes = 0.0;
     let models = bitt_mesh::procedural_pair();
     let mut results = Vec::new();
     for (name, device) in devices() {
