@@ -96,9 +96,12 @@ impl BittNetsConfig {
                 HtmlEncoderConfig::new(),
                 BtrConfig::new(),
             ),
-            // Sized so that `cargo xtask train-scene` trains in minutes on a 2-core CPU:
-            // the procedural hand's 256 x 256 UV layout (28,544 texels), a quarter of the
-            // paper's albedo widths and half of BTR's.
+            // Sized so that `cargo xtask train-scene` trains in about 2 minutes on a 2-core
+            // CPU: the procedural hand's 256 x 256 UV layout (28,544 texels), a quarter of the
+            // paper's albedo widths and an eighth of BTR's below the stem (8 groups per norm
+            // need multiples of 8). BTR was `8, 16, 32, 64` until 2026-12-06; this width
+            // trains the demo in 0.63x the time with equal or better scores on it
+            // (`docs/training.md`, issue 37).
             Preset::Quick => BittNetsConfig::new(
                 128,
                 QUICK_TEXELS,
@@ -109,7 +112,7 @@ impl BittNetsConfig {
                 HtmlEncoderConfig::new()
                     .with_image_size(128)
                     .with_base_channels(16),
-                BtrConfig::new().with_channels(vec![8, 16, 32, 64]),
+                BtrConfig::new().with_channels(vec![8, 8, 16, 32]),
             ),
             Preset::Tiny => BittNetsConfig::new(
                 32,

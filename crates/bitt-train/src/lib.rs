@@ -32,7 +32,7 @@ pub mod optim;
 pub mod pipeline;
 pub mod trainer;
 
-pub use config::{LossWeights, OptimConfig, TrainConfig};
+pub use config::{LossWeights, OptimConfig, QUICK_PHOTO_BTR_CHANNELS, TrainConfig};
 pub use error::TrainError;
 pub use losses::LossTerms;
 pub use trainer::{Observer, Progress, Trainer};
