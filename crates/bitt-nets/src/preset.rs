@@ -100,7 +100,7 @@ impl BittNetsConfig {
             // CPU: the procedural hand's 256 x 256 UV layout (28,544 texels), a quarter of the
             // paper's albedo widths and an eighth of BTR's below the stem (8 groups per norm
             // need multiples of 8). BTR was `8, 16, 32, 64` until 2026-12-06; this width
-            // trains the demo in 0.63x the time with equal or better scores on it
+            // trains the demo in about 0.64x the time with equal or better scores on it
             // (`docs/training.md`, issue 37).
             Preset::Quick => BittNetsConfig::new(
                 128,
