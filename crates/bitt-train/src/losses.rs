@@ -92,13 +92,39 @@ fn l1<const D: usize>(a: Tensor<D>, b: Tensor<D>) -> Tensor<1> {
     (a - b).abs().mean()
 }
 
+/// The range of [`prior_colour_gain`]: a photo's colour may differ from the prior's by a
+/// factor of 2 per channel, no more (a seen region that small or that odd says more about
+/// the meshes than about the skin).
+pub const PRIOR_COLOUR_GAIN_RANGE: [f32; 2] = [0.5, 2.0];
+
+/// One gain per colour channel that brings the prior's colour to the photo's: the seen
+/// texels' unwrapped albedo over the prior's values at those texels, summed over both
+/// hands, without gradient. A view that shows no texel gives 1: both sums start from one
+/// texel's worth of grey (`+1`), which a few seen texels already outweigh.
+///
+/// # Shapes
+/// - output: `[1, 3, 1]`
+pub fn prior_colour_gain(outputs: &Outputs, view: &TrainingView) -> Tensor<3> {
+    let sums = |t: &[Tensor<3>; 2]| {
+        (0..2)
+            .map(|i| (t[i].clone().detach() * view.visible[i].clone()).sum_dim(2))
+            .reduce(|a, b| a + b)
+            .expect("two hands")
+            .add_scalar(1.0)
+    };
+    let [lo, hi] = PRIOR_COLOUR_GAIN_RANGE;
+    (sums(&outputs.unwrapped) / sums(&outputs.coarse)).clamp(lo, hi)
+}
+
 /// The paper's total loss (eq. 10) for one forward pass.
 ///
 /// - `L_rec = |I - I_fine| + 0.8 |I - I_coarse| + 0.4 |I - I_albedo|` with `I = I_hand`, the
 ///   input image times the hand mask (the renders are black off the hands), each pixel
 ///   times the view's weight (1, or 0 at a photo's untrusted pixels:
 ///   [`TrainingView::trust_photo`]);
-/// - `L_nv = sum_i mean |(T(h_i) - t̂_i)(1 - v_i)|`;
+/// - `L_nv = sum_i mean |(T(h_i) - t̂_i)(1 - v_i)|`; when the view asks for it (real photos,
+///   `loss.photo_prior_colour`) `t̂_i` is held to `T(h_i)` times [`prior_colour_gain`]
+///   instead, while `T(h_i)` is still held to `t̂_i`;
 /// - `L_alb = sum_{i<j} mean |A(I_coarse,l_i) - A(I_coarse,l_j)|` over the three lights;
 /// - `L_sym = mean |t̂_l - t̂_r|`.
 pub fn loss(outputs: &Outputs, view: &TrainingView, w: &LossWeights) -> Loss {
@@ -113,12 +139,30 @@ pub fn loss(outputs: &Outputs, view: &TrainingView, w: &LossWeights) -> Loss {
     let rec_fine = rec(outputs.fine_image.clone());
     let rec_coarse = rec(outputs.coarse_image.clone());
     let rec_albedo = rec(outputs.albedo_render.clone());
+    let gain = view
+        .prior_colour_gain
+        .then(|| prior_colour_gain(outputs, view));
     let nv = (0..2)
         .map(|i| {
             let hidden = view.visible[i].clone().neg().add_scalar(1.0);
-            ((outputs.coarse[i].clone() - outputs.fine[i].clone()) * hidden)
-                .abs()
-                .mean()
+            let (coarse, fine) = (outputs.coarse[i].clone(), outputs.fine[i].clone());
+            match &gain {
+                None => ((coarse - fine) * hidden).abs().mean(),
+                Some(g) => {
+                    // BTR is held to the gained prior, and the prior to BTR as the paper
+                    // holds it. Were the prior held to BTR over the gain, the two would feed
+                    // each other: a darker prior raises the gain, which asks the prior to be
+                    // darker still (measured: the prior went brown and the gain to its end).
+                    // The term's value is `|g T(h) - t̂|`; its gradient reaches t̂ through
+                    // that and T(h) through `|T(h) - t̂|`.
+                    let to_btr = ((coarse.clone().detach() * g.clone() - fine.clone())
+                        * hidden.clone())
+                    .abs()
+                    .mean();
+                    let to_prior = ((coarse - fine.detach()) * hidden).abs().mean();
+                    to_btr + to_prior.clone() - to_prior.detach()
+                }
+            }
         })
         .reduce(|a, b| a + b)
         .expect("two hands");

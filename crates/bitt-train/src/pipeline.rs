@@ -42,6 +42,11 @@ pub struct TrainingView {
     /// [`Trainer::search_light_location`](crate::trainer::Trainer::search_light_location)
     /// (`loss.photo_light_search`).
     pub light_location: Option<[f32; 3]>,
+    /// The non-visible term compares BTR's texture with the prior times one gain per colour
+    /// channel, the seen texels' colour over the prior's there ([`crate::losses`],
+    /// `loss.photo_prior_colour`, real photos only). `false`: the prior as it is, as the
+    /// paper does.
+    pub prior_colour_gain: bool,
 }
 
 impl TrainingView {
@@ -122,6 +127,7 @@ impl TrainingView {
             image,
             weight: None,
             one_colour_light: false,
+            prior_colour_gain: false,
             light_location: None,
             mask,
             hand_image,

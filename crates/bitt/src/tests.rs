@@ -745,6 +745,124 @@ fn an_untrusted_photo_pixel_neither_trains_nor_unwraps() {
     assert!(rec_fine(&trusted) > before + 0.1);
 }
 
+/// The prior's colour gain (`loss.photo_prior_colour`, issue 34): one gain per channel, the
+/// seen texels' unwrapped albedo over the prior there (both hands, `+1` on both sums), 1 for
+/// a view that shows nothing, clamped to its range; with it the non-visible term holds
+/// BTR's texture to the gained prior, without it to the prior, as the paper does.
+#[test]
+fn the_prior_colour_gain_brings_the_prior_to_the_seen_colour() {
+    use crate::losses::{PRIOR_COLOUR_GAIN_RANGE, loss, prior_colour_gain};
+    let (mut config, scene, pca) = tiny();
+    config.iterations = 1;
+    let device = Device::flex().autodiff();
+    let t = synthetic_trainer(&scene, &config, &pca, &device).unwrap();
+    let mut outputs = t.forward().unwrap();
+    let host = |x: burn::tensor::Tensor<3>| bitt_stdx::to_host(x.inner()).unwrap();
+    // A photo 0.8 / 1.0 / 1.3 times the prior's colour where it is seen.
+    let tint = burn::tensor::Tensor::<1>::from_floats([0.8, 1.0, 1.3], &device).reshape([1, 3, 1]);
+    for i in 0..2 {
+        outputs.unwrapped[i] = outputs.coarse[i].clone() * tint.clone() * t.view.visible[i].clone();
+    }
+    let seen: f32 = (0..2)
+        .map(|i| host(t.view.visible[i].clone()).iter().sum::<f32>())
+        .sum();
+    assert!(seen > 10.0, "the tiny scene shows {seen} texels");
+    let gain = host(prior_colour_gain(&outputs, &t.view));
+    let (mut num, mut den) = ([1.0f64; 3], [1.0f64; 3]);
+    for i in 0..2 {
+        let (u, c, v) = (
+            host(outputs.unwrapped[i].clone()),
+            host(outputs.coarse[i].clone()),
+            host(t.view.visible[i].clone()),
+        );
+        let n = v.len();
+        for ch in 0..3 {
+            for k in 0..n {
+                num[ch] += f64::from(u[ch * n + k] * v[k]);
+                den[ch] += f64::from(c[ch * n + k] * v[k]);
+            }
+        }
+    }
+    for ch in 0..3 {
+        let want = (num[ch] / den[ch]) as f32;
+        assert!(
+            (gain[ch] - want).abs() < 1e-4,
+            "channel {ch}: {} vs {want}",
+            gain[ch]
+        );
+        let tinted = [0.8, 1.0, 1.3][ch];
+        assert!(
+            (gain[ch] - tinted).abs() < 0.05,
+            "channel {ch}: {} vs {tinted}",
+            gain[ch]
+        );
+    }
+    // A colour beyond the range is clamped to it.
+    let mut far = outputs.clone();
+    for i in 0..2 {
+        far.unwrapped[i] = far.unwrapped[i].clone().mul_scalar(10.0);
+    }
+    let g = host(prior_colour_gain(&far, &t.view));
+    assert!(g.iter().all(|&x| x == PRIOR_COLOUR_GAIN_RANGE[1]), "{g:?}");
+    // A view that shows no texel: gain 1.
+    let mut blind = t.view.clone();
+    blind.visible = blind.visible.clone().map(|v| v.zeros_like());
+    let g = host(prior_colour_gain(&outputs, &blind));
+    assert!(g.iter().all(|&x| x == 1.0), "{g:?}");
+    // BTR's texture equal to the gained prior: the term is 0 with the gain, not without.
+    let gain_tensor = prior_colour_gain(&outputs, &t.view);
+    for i in 0..2 {
+        let coarse = outputs.coarse[i].clone().detach();
+        outputs.fine[i] = (coarse.clone() * gain_tensor.clone()).require_grad();
+        outputs.coarse[i] = coarse.require_grad();
+    }
+    let nv = |v: &crate::pipeline::TrainingView| {
+        bitt_stdx::to_host(loss(&outputs, v, &t.config.loss).terms[3].clone()).unwrap()[0]
+    };
+    let mut gained = t.view.clone();
+    gained.prior_colour_gain = true;
+    assert!(
+        !t.view.prior_colour_gain,
+        "synthetic views keep the paper's term"
+    );
+    let (with, without) = (nv(&gained), nv(&t.view));
+    assert!(
+        with < 0.02 * without && without > 1e-3,
+        "{with} vs {without}"
+    );
+    // ... and its gradient leaves BTR's texture where it is, while the prior is still pulled
+    // towards BTR's texture as the paper pulls it (not towards texture / gain: the two
+    // would feed each other).
+    let terms = loss(&outputs, &gained, &t.config.loss).terms;
+    let grads = terms[3].clone().backward();
+    let fine_grad = bitt_stdx::to_host(outputs.fine[1].grad(&grads).unwrap()).unwrap();
+    assert!(
+        fine_grad.iter().all(|&g| g.abs() < 1e-9),
+        "BTR's texture is pulled"
+    );
+    let coarse_grad = bitt_stdx::to_host(outputs.coarse[1].grad(&grads).unwrap()).unwrap();
+    let (c, v) = (
+        host(outputs.coarse[1].clone()),
+        host(t.view.visible[1].clone()),
+    );
+    let n = v.len();
+    for ch in 0..3 {
+        for k in (0..n).step_by(97) {
+            let g = coarse_grad[ch * n + k];
+            if v[k] > 0.5 || c[ch * n + k] == 0.0 {
+                assert!(g.abs() < 1e-9, "seen or empty texel {k} pulled: {g}");
+            } else if (gain[ch] - 1.0).abs() > 1e-4 {
+                // d/dc |c - g c| over 3 T elements: sign(1 - g) / (3 T).
+                let want = (1.0 - gain[ch]).signum() / (3 * n) as f32;
+                assert!(
+                    (g - want).abs() < 1e-3 * want.abs(),
+                    "texel {k}: {g} vs {want}"
+                );
+            }
+        }
+    }
+}
+
 /// A cached texture PCA fitted on another layout (a cache from before the procedural hands'
 /// surface changed) is refitted, not used: using it would hand the trainer and the
 /// refinement a basis of the wrong size.

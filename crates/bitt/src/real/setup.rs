@@ -146,6 +146,7 @@ pub fn refined_real_trainer(
     let threshold = config.loss.photo_mask;
     let one_colour_light = config.loss.photo_light;
     let light_search = config.loss.photo_light_search;
+    let prior_colour_gain = config.loss.photo_prior_colour;
     let mut trainer = Trainer::new(config, assets, &pca, geometry, view_image, None, device)?;
     if threshold > 0.0 {
         let keep: Vec<bool> = threshold_mask(view_image, s * s, threshold as f32)
@@ -155,6 +156,7 @@ pub fn refined_real_trainer(
         trainer.view.trust_photo(&keep)?;
     }
     trainer.view.one_colour_light = one_colour_light;
+    trainer.view.prior_colour_gain = prior_colour_gain;
     if light_search {
         trainer.view.light_location = Some(trainer.search_light_location()?.location);
     }
