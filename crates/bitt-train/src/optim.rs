@@ -93,9 +93,12 @@ impl ModuleMapper for AdamMapper<'_> {
         let scalars = AdamScalars::at_step(c, t, self.learning_rate);
         let (m, v) = (s.m[i].take(), s.v[i].take());
         let value = value.inner().reshape([n]);
-        let (p, m, v) = match flex_update(&value, &g, m.as_ref(), v.as_ref(), scalars) {
-            Some(updated) => updated,
-            None => tensor_update(value, g, m, v, scalars),
+        let (p, m, v) = match flex_update(value, &g, m, v, scalars) {
+            Ok(updated) => updated,
+            Err(given_back) => {
+                let (value, m, v) = *given_back;
+                tensor_update(value, g, m, v, scalars)
+            }
         };
         s.m[i] = Some(m);
         s.v[i] = Some(v);
@@ -162,38 +165,62 @@ fn tensor_update(
 /// Elements per parallel chunk of [`flex_update`].
 const FLEX_CHUNK: usize = 1 << 14;
 
-/// [`tensor_update`] on flex as one pass over the elements on rayon's threads; `None`
-/// (nothing computed) when a tensor is not a contiguous `f32` flex tensor. Each element sees
-/// the same `f32` operations in the same order as [`tensor_update`] (scalars rounded to
-/// `f32` first, as burn's scalar operations do), so both give identical bits; a test checks
-/// it. The operations composed from tensors allocate and walk the parameter a dozen times,
-/// on one thread: about a seventh of the main thread's time in a `quick` step.
+/// [`tensor_update`] on flex as one pass over the elements on rayon's threads, or the
+/// tensors given back (nothing computed) when one is not a contiguous `f32` flex tensor.
+/// Each element sees the same `f32` operations in the same order as [`tensor_update`]
+/// (scalars rounded to `f32` first, as burn's scalar operations do), so both give identical
+/// bits; a test checks it. The operations composed from tensors allocate and walk the
+/// parameter a dozen times, on one thread: about a seventh of the main thread's time in a
+/// `quick` step. The parameter and its moments are updated where they lie when nothing
+/// else holds them (the trainer's case: the moments live only in [`AdamState`], and the
+/// graph that held the parameter is gone after the backward pass); a shared one is copied
+/// first.
 fn flex_update(
-    p: &Tensor<1>,
+    p: Tensor<1>,
     g: &Tensor<1>,
-    m: Option<&Tensor<1>>,
-    v: Option<&Tensor<1>>,
+    m: Option<Tensor<1>>,
+    v: Option<Tensor<1>>,
     c: AdamScalars,
-) -> Option<(Tensor<1>, Tensor<1>, Tensor<1>)> {
+) -> Result<(Tensor<1>, Tensor<1>, Tensor<1>), GivenBack> {
     use burn::backend::Flex;
     use burn::backend::flex::FlexTensor;
     use rayon::prelude::*;
-    let flex = |t: &Tensor<1>| t.clone().try_into_primitive::<Flex>().ok();
-    let (pf, gf) = (flex(p)?, flex(g)?);
-    let (mf, vf) = match (m, v) {
-        (Some(m), Some(v)) => (Some(flex(m)?), Some(flex(v)?)),
+    let flex = |t: &Tensor<1>| {
+        t.clone()
+            .try_into_primitive::<Flex>()
+            .ok()
+            .filter(|f| f.as_slice::<f32>().is_some())
+    };
+    let (Some(gf), Some(pf)) = (flex(g), flex(&p)) else {
+        return Err(Box::new((p, m, v)));
+    };
+    let (mf, vf) = match (&m, &v) {
+        (Some(mt), Some(vt)) => match (flex(mt), flex(vt)) {
+            (Some(a), Some(b)) => (Some(a), Some(b)),
+            _ => return Err(Box::new((p, m, v))),
+        },
         (None, None) => (None, None),
-        _ => return None,
+        _ => return Err(Box::new((p, m, v))),
     };
-    let (ps, gs) = (pf.as_slice::<f32>()?, gf.as_slice::<f32>()?);
-    let n = ps.len();
-    let (ms, vs) = match (&mf, &vf) {
-        (Some(m), Some(v)) => (Some(m.as_slice::<f32>()?), Some(v.as_slice::<f32>()?)),
-        _ => (None, None),
-    };
-    if gs.len() != n || ms.is_some_and(|m| m.len() != n) || vs.is_some_and(|v| v.len() != n) {
-        return None;
+    let n = p.dims()[0];
+    let len = |f: &FlexTensor| f.as_slice::<f32>().map_or(0, <[f32]>::len);
+    if len(&gf) != n
+        || len(&pf) != n
+        || [&mf, &vf]
+            .iter()
+            .any(|f| f.as_ref().is_some_and(|f| len(f) != n))
+    {
+        return Err(Box::new((p, m, v)));
     }
+    // The flex tensors are now the only holders of the values, unless someone else is.
+    drop((p, m, v));
+    let first = mf.is_none();
+    let (mut p_buf, mut m_buf, mut v_buf) = (
+        Values::of(pf),
+        mf.map_or_else(|| Values::Fresh(vec![0.0; n]), Values::of),
+        vf.map_or_else(|| Values::Fresh(vec![0.0; n]), Values::of),
+    );
+    let gs = gf.as_slice::<f32>().unwrap_or_default();
     let beta1 = c.beta1 as f32;
     let beta2 = c.beta2 as f32;
     let one_minus_beta1 = (1.0 - c.beta1) as f32;
@@ -201,35 +228,78 @@ fn flex_update(
     let sqrt_bias2 = c.bias2.sqrt() as f32;
     let epsilon = c.epsilon as f32;
     let step = (c.learning_rate / c.bias1) as f32;
-    let (mut p_out, mut m_out, mut v_out) = (vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n]);
-    p_out
+    p_buf
+        .values()
         .par_chunks_mut(FLEX_CHUNK)
-        .zip(m_out.par_chunks_mut(FLEX_CHUNK))
-        .zip(v_out.par_chunks_mut(FLEX_CHUNK))
-        .enumerate()
-        .for_each(|(k, ((po, mo), vo))| {
-            let from = k * FLEX_CHUNK;
-            for j in 0..po.len() {
-                let e = from + j;
-                let g = gs[e];
-                let m = match ms {
-                    Some(ms) => ms[e] * beta1 + g * one_minus_beta1,
-                    None => g * one_minus_beta1,
+        .zip(m_buf.values().par_chunks_mut(FLEX_CHUNK))
+        .zip(v_buf.values().par_chunks_mut(FLEX_CHUNK))
+        .zip(gs.par_chunks(FLEX_CHUNK))
+        .for_each(|(((ps, ms), vs), gs)| {
+            for (((p, m), v), &g) in ps.iter_mut().zip(ms).zip(vs).zip(gs) {
+                let new_m = if first {
+                    g * one_minus_beta1
+                } else {
+                    *m * beta1 + g * one_minus_beta1
                 };
-                let v = match vs {
-                    Some(vs) => vs[e] * beta2 + (g * g) * one_minus_beta2,
-                    None => (g * g) * one_minus_beta2,
+                let new_v = if first {
+                    (g * g) * one_minus_beta2
+                } else {
+                    *v * beta2 + (g * g) * one_minus_beta2
                 };
-                let denom = v.sqrt() / sqrt_bias2 + epsilon;
-                po[j] = ps[e] - (m / denom) * step;
-                mo[j] = m;
-                vo[j] = v;
+                let denom = new_v.sqrt() / sqrt_bias2 + epsilon;
+                *p -= (new_m / denom) * step;
+                *m = new_m;
+                *v = new_v;
             }
         });
-    let tensor = |values: Vec<f32>| {
-        Tensor::from_primitive::<Flex>(FlexTensor::from_data(TensorData::new(values, [n])))
-    };
-    Some((tensor(p_out), tensor(m_out), tensor(v_out)))
+    Ok((p_buf.tensor(n), m_buf.tensor(n), v_buf.tensor(n)))
+}
+
+/// The parameter and moments [`flex_update`] gives back when it cannot take them.
+type GivenBack = Box<(Tensor<1>, Option<Tensor<1>>, Option<Tensor<1>>)>;
+
+/// The values [`flex_update`] writes: a flex tensor's own storage when nothing else holds
+/// it, else a new buffer.
+enum Values {
+    /// A contiguous `f32` flex tensor that nothing else holds (its storage is exactly its
+    /// values).
+    Owned(burn::backend::flex::FlexTensor),
+    /// A copy, or zeros for a moment's first step.
+    Fresh(Vec<f32>),
+}
+
+impl Values {
+    /// `t`'s storage when it can be written in place, else a copy of its values.
+    fn of(mut t: burn::backend::flex::FlexTensor) -> Self {
+        let whole = t
+            .as_slice::<f32>()
+            .is_some_and(|s| s.len() == t.storage::<f32>().len());
+        if whole && t.try_storage_mut::<f32>().is_some() {
+            Values::Owned(t)
+        } else {
+            Values::Fresh(t.as_slice::<f32>().unwrap_or_default().to_vec())
+        }
+    }
+
+    fn values(&mut self) -> &mut [f32] {
+        match self {
+            // Nothing can have taken a share since `Values::of` checked.
+            Values::Owned(t) => t
+                .try_storage_mut::<f32>()
+                .expect("a tensor found unshared stays unshared"),
+            Values::Fresh(v) => v,
+        }
+    }
+
+    fn tensor(self, n: usize) -> Tensor<1> {
+        use burn::backend::Flex;
+        use burn::backend::flex::FlexTensor;
+        let t = match self {
+            Values::Owned(t) => t,
+            Values::Fresh(v) => FlexTensor::from_data(TensorData::new(v, [n])),
+        };
+        Tensor::from_primitive::<Flex>(t)
+    }
 }
 
 /// Every float parameter of a module, flattened, in visiting order (host `f32`).
@@ -378,26 +448,60 @@ mod tests {
         let (p, g) = (values(2.0, 0.0), values(1e-2, 0.0));
         let (m, v) = (values(1e-2, 0.0), values(1e-4, 1e-4));
         let c = OptimConfig::default();
+        let p_before = bitt_testkit::to_vec(p.clone());
         for (t, moments) in [(1, None), (57, Some((m, v)))] {
             let scalars = AdamScalars::at_step(&c, t, 1e-3);
+            let moments_before = moments.as_ref().map(|(m, _)| {
+                Tensor::<1>::from_data(
+                    TensorData::new(bitt_testkit::to_vec(m.clone()), [n]),
+                    &device,
+                )
+            });
             let (m, v) = moments.unzip();
-            let fused = flex_update(&p, &g, m.as_ref(), v.as_ref(), scalars)
-                .expect("flex tensors take the one-pass update");
-            let composed = tensor_update(p.clone(), g.clone(), m, v, scalars);
             let bits = |t: &Tensor<1>| -> Vec<u32> {
                 bitt_testkit::to_vec(t.clone())
                     .iter()
                     .map(|x| x.to_bits())
                     .collect()
             };
-            for (a, b) in [
-                (&fused.0, &composed.0),
-                (&fused.1, &composed.1),
-                (&fused.2, &composed.2),
-            ] {
-                assert_eq!(bits(a), bits(b), "step {t}");
+            let composed = tensor_update(p.clone(), g.clone(), m.clone(), v.clone(), scalars);
+            // Shared tensors (these clones are also held here) are copied, unshared ones
+            // (fresh copies of the values) updated in place; both give the same bits.
+            let unshared = |t: &Tensor<1>| {
+                Tensor::<1>::from_data(
+                    TensorData::new(bitt_testkit::to_vec(t.clone()), [n]),
+                    &device,
+                )
+            };
+            let shared = flex_update(p.clone(), &g, m.clone(), v.clone(), scalars)
+                .expect("flex tensors take the one-pass update");
+            let in_place = flex_update(
+                unshared(&p),
+                &g,
+                m.as_ref().map(unshared),
+                v.as_ref().map(unshared),
+                scalars,
+            )
+            .expect("flex tensors take the one-pass update");
+            for fused in [&shared, &in_place] {
+                for (a, b) in [
+                    (&fused.0, &composed.0),
+                    (&fused.1, &composed.1),
+                    (&fused.2, &composed.2),
+                ] {
+                    assert_eq!(bits(a), bits(b), "step {t}");
+                }
             }
-            assert_ne!(bits(&fused.0), bits(&p), "step {t}: the parameter moved");
+            assert_ne!(bits(&shared.0), bits(&p), "step {t}: the parameter moved");
+            assert_eq!(
+                bitt_testkit::to_vec(p.clone()),
+                p_before,
+                "a shared parameter was written"
+            );
+            // The shared inputs are untouched.
+            if let (Some(m0), Some(m1)) = (&m, &moments_before) {
+                assert_eq!(bits(m0), bits(m1), "step {t}: a shared moment was written");
+            }
         }
     }
 
