@@ -177,7 +177,6 @@ pub fn run_baseline(
         learning_rate: config.learning_rate,
         ..OptimConfig::default()
     });
-    let gather = trainer.assets.gather(device);
     let textures = |c: &Colours| -> [Tensor<2>; 2] {
         let s = burn::tensor::activation::sigmoid(c.logits.val());
         let hand = |i: usize| s.clone().narrow(0, i, 1).reshape([3, n]);
@@ -192,7 +191,6 @@ pub fn run_baseline(
         let light = point_light(&LightParams::from_raw(colours.light.val()));
         let r = view.geometry.render(
             &trainer.assets,
-            &gather,
             textures(&colours),
             &light,
             &trainer.settings,

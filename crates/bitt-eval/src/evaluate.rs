@@ -294,10 +294,8 @@ pub fn render_geometry(
     let device = geometry.vertices[0].device();
     let t = trainer.assets.num_texels();
     let tex = |v: &Vec<f32>| Tensor::<2>::from_data(TensorData::new(v.clone(), [3, t]), &device);
-    let gather = trainer.assets.gather(&device);
     let r = geometry.render(
         &trainer.assets,
-        &gather,
         [tex(&textures[0]), tex(&textures[1])],
         light,
         &trainer.settings,

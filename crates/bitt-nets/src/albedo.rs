@@ -37,6 +37,7 @@ use burn::tensor::{Device, Tensor};
 
 use crate::NetsError;
 use crate::conv_block::{Activation, conv_act, conv_norm_act};
+use crate::fused::resample::{interleave_phases, upsample2};
 
 /// Configuration of [`AlbedoNet`].
 #[derive(Config, Debug)]
@@ -165,14 +166,6 @@ impl AlbedoNetConfig {
     }
 }
 
-/// Nearest-neighbour x2 upsampling: `[N, C, H, W] -> [N, C, 2H, 2W]`.
-fn upsample2(x: Tensor<4>) -> Tensor<4> {
-    let [n, c, h, w] = x.dims();
-    x.reshape([n, c, h, 1, w, 1])
-        .expand([n, c, h, 2, w, 2])
-        .reshape([n, c, 2 * h, 2 * w])
-}
-
 /// `sigmoid(conv3x3(pad_edge(upsample2(x))) + bias)`, the outermost level's up path,
 /// computed at the low resolution: along each axis an even output `2a` reads the padded
 /// upsampled input at `2a - 1, 2a, 2a + 1`, i.e. `x[a - 1], x[a], x[a]` (indices clamped),
@@ -186,7 +179,6 @@ fn upsample2(x: Tensor<4>) -> Tensor<4> {
 /// # Shapes
 /// - `x`: `[B, C, H, W]` (rectified); output: `[B, C_out, 2H, 2W]`
 fn outermost_up(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
-    let [b, _, h, w] = x.dims();
     let weight = conv.weight.val();
     let co = weight.dims()[0];
     // The two 2-tap kernels of one axis (`dim` 2: rows, 3: columns).
@@ -213,14 +205,7 @@ fn outermost_up(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
         Activation::Sigmoid,
     );
     // Phase (py, px) lives at rows py.., columns px.. of its channels.
-    let phase = |k: usize, py: usize, px: usize| {
-        out.clone()
-            .slice([0..b, k * co..(k + 1) * co, py..py + h, px..px + w])
-            .reshape([b, co, h, 1, w, 1])
-    };
-    let even = Tensor::cat(vec![phase(0, 0, 0), phase(1, 0, 1)], 5);
-    let odd = Tensor::cat(vec![phase(2, 1, 0), phase(3, 1, 1)], 5);
-    Tensor::cat(vec![even, odd], 3).reshape([b, co, 2 * h, 2 * w])
+    interleave_phases(out, co)
 }
 
 impl UnetLevel {

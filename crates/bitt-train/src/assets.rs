@@ -136,8 +136,9 @@ struct Occlusion {
 }
 
 /// What identifies a [`SceneGeometry`] of one view: depth range, antialiasing, texture side,
-/// per-pixel layout.
-type CacheKey = (DepthRange, bool, usize, GeometryPath);
+/// per-pixel layout, and whether it samples compact textures
+/// ([`SceneGeometry::with_compact_textures`]).
+type CacheKey = (DepthRange, bool, usize, GeometryPath, bool);
 
 /// The [`SceneGeometry`]s made so far, with their keys.
 type CacheEntries = Vec<(CacheKey, Arc<SceneGeometry>)>;
@@ -285,7 +286,35 @@ impl ViewGeometry {
         texture_size: usize,
         path: GeometryPath,
     ) -> Result<Arc<SceneGeometry>, TrainError> {
-        let key = (settings.depth, settings.antialias, texture_size, path);
+        self.cached_geometry(assets, settings, texture_size, path, false)
+    }
+
+    /// The geometry of [`ViewGeometry::scene_geometry`] (the assets' texture size) prepared
+    /// for the compact textures of `assets.layouts`, cached alike.
+    fn compact_geometry(
+        &self,
+        assets: &HandAssets,
+        settings: &RenderSettings,
+        path: GeometryPath,
+    ) -> Result<Arc<SceneGeometry>, TrainError> {
+        self.cached_geometry(assets, settings, assets.texture_size, path, true)
+    }
+
+    fn cached_geometry(
+        &self,
+        assets: &HandAssets,
+        settings: &RenderSettings,
+        texture_size: usize,
+        path: GeometryPath,
+        compact: bool,
+    ) -> Result<Arc<SceneGeometry>, TrainError> {
+        let key = (
+            settings.depth,
+            settings.antialias,
+            texture_size,
+            path,
+            compact,
+        );
         let mut cache = self.cache.0.lock().unwrap_or_else(|e| e.into_inner());
         if let Some((_, g)) = cache.iter().find(|(k, _)| *k == key) {
             return Ok(g.clone());
@@ -297,7 +326,7 @@ impl ViewGeometry {
                 &self.vertices[0].device(),
             )
         });
-        let g = Arc::new(SceneGeometry::with_occlusion(
+        let mut g = SceneGeometry::with_occlusion(
             &assets.scene,
             &self.vertices,
             occlusion,
@@ -305,7 +334,11 @@ impl ViewGeometry {
             settings,
             &[[texture_size; 2]; 2],
             path,
-        )?);
+        )?;
+        if compact {
+            g = g.with_compact_textures(&[&assets.layouts[0], &assets.layouts[1]])?;
+        }
+        let g = Arc::new(g);
         cache.push((key, g.clone()));
         Ok(g)
     }
@@ -321,15 +354,13 @@ impl ViewGeometry {
     pub fn render(
         &self,
         assets: &HandAssets,
-        gather: &LayoutGather,
         textures: [Tensor<2>; 2],
         light: &PointLight,
         settings: &RenderSettings,
     ) -> Result<SceneRender, TrainError> {
-        let path = GeometryPath::Covered;
-        let g = self.scene_geometry(assets, settings, assets.texture_size, path)?;
+        let g = self.compact_geometry(assets, settings, GeometryPath::Covered)?;
         Ok(SceneRender {
-            image: self.shade(&g, gather, textures, light, settings)?,
+            image: g.shade_compact(&textures, light, &settings.material, settings.background)?,
             masks: g.masks.clone(),
             raster: g.raster()?.clone(),
             clip: g.clip.clone(),
@@ -342,30 +373,12 @@ impl ViewGeometry {
     pub(crate) fn render_image(
         &self,
         assets: &HandAssets,
-        gather: &LayoutGather,
         textures: [Tensor<2>; 2],
         light: &PointLight,
         settings: &RenderSettings,
     ) -> Result<Tensor<3>, TrainError> {
-        let path = GeometryPath::Auto;
-        let g = self.scene_geometry(assets, settings, assets.texture_size, path)?;
-        self.shade(&g, gather, textures, light, settings)
-    }
-
-    fn shade(
-        &self,
-        geometry: &SceneGeometry,
-        gather: &LayoutGather,
-        textures: [Tensor<2>; 2],
-        light: &PointLight,
-        settings: &RenderSettings,
-    ) -> Result<Tensor<3>, TrainError> {
-        let [l, r] = textures;
-        let images = [
-            gather.compact_to_image(l, [0.0; 3]),
-            gather.compact_to_image(r, [0.0; 3]),
-        ];
-        Ok(geometry.shade(&images, light, &settings.material, settings.background)?)
+        let g = self.compact_geometry(assets, settings, GeometryPath::Auto)?;
+        Ok(g.shade_compact(&textures, light, &settings.material, settings.background)?)
     }
 }
 

@@ -73,7 +73,6 @@ impl Trainer {
         let render = |light: LightValues| -> Result<Vec<f32>, TrainError> {
             let image = view.geometry.render_image(
                 &self.assets,
-                &self.gather,
                 [mean.clone(), mean.clone()],
                 &light.to_light(&device),
                 &self.settings,

@@ -6,7 +6,7 @@ use bitt_render::scene::LightValuesExt;
 use bitt_nets::{BittNets, LightParams, compose_texels};
 use bitt_render::scene::{PointLight, RenderSettings, UnwrapPlan, UnwrapSettings};
 use bitt_stdx::to_host;
-use bitt_texture::{LayoutGather, TexturePcaTensors};
+use bitt_texture::TexturePcaTensors;
 use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::TrainError;
@@ -77,13 +77,11 @@ impl TrainingView {
         let light = bitt_render::scene::LightValues::default().to_light(device);
         let t = assets.num_texels();
         let zeros = Tensor::<2>::zeros([3, t], device);
-        let gather = assets.gather(device);
         let settings = RenderSettings {
             antialias: false,
             ..RenderSettings::default()
         };
-        let silhouette =
-            geometry.render(assets, &gather, [zeros.clone(), zeros], &light, &settings)?;
+        let silhouette = geometry.render(assets, [zeros.clone(), zeros], &light, &settings)?;
         let unwrap = UnwrapSettings::default();
         let plan = |i: usize| {
             UnwrapPlan::new(
@@ -312,7 +310,6 @@ pub fn forward(
     nets: &BittNets,
     pca: &TexturePcaTensors,
     assets: &HandAssets,
-    gather: &LayoutGather,
     view: &TrainingView,
     settings: &RenderSettings,
     consistency: Consistency,
@@ -346,7 +343,6 @@ pub fn forward(
         |textures: [Tensor<3>; 2], light: &PointLight| -> Result<Tensor<4>, TrainError> {
             let image = view.geometry.render_image(
                 assets,
-                gather,
                 [compact(&textures[0]), compact(&textures[1])],
                 light,
                 settings,

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use bitt_nets::BittNets;
 use bitt_render::scene::RenderSettings;
-use bitt_texture::{LayoutGather, TexturePca, TexturePcaTensors};
+use bitt_texture::{TexturePca, TexturePcaTensors};
 use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::TrainError;
@@ -127,8 +127,6 @@ pub struct Trainer {
     pub pca: TexturePcaTensors,
     /// Hand models, meshes, layouts.
     pub assets: HandAssets,
-    /// Compact <-> image index tensors.
-    pub gather: LayoutGather,
     /// The training view.
     pub view: TrainingView,
     /// Render settings of every render.
@@ -199,14 +197,12 @@ impl Trainer {
                 )));
             }
         }
-        let gather = assets.gather(device);
         Ok(Trainer {
             adam: Adam::new(config.optim.clone()),
             pca: pca.to_device(device),
             config,
             nets,
             assets,
-            gather,
             view,
             settings: RenderSettings::default(),
             iteration: 0,
@@ -230,7 +226,6 @@ impl Trainer {
             &self.nets,
             &self.pca,
             &self.assets,
-            &self.gather,
             &self.view,
             &self.settings,
             self.config.loss.consistency(),

@@ -870,7 +870,6 @@ impl SavedAvatar {
         };
         let r = geometry.render(
             &assets,
-            &assets.gather(device),
             [tex(&self.fine[0]), tex(&self.fine[1])],
             &light.to_light(device),
             &bitt_render::scene::RenderSettings::default(),

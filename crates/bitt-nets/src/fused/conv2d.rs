@@ -58,13 +58,20 @@ thread_local! {
     static DISABLED: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
 }
 
-/// Runs `f` with [`conv2d_norm_act`] declining on this thread (tests).
+/// Runs `f` with [`conv2d_norm_act`] and the resampling operations
+/// ([`super::resample`]) declining on this thread (tests).
 #[cfg(test)]
 pub(crate) fn without_fusion<T>(f: impl FnOnce() -> T) -> T {
     DISABLED.with(|d| d.set(true));
     let out = f();
     DISABLED.with(|d| d.set(false));
     out
+}
+
+/// Whether [`without_fusion`] is running on this thread.
+#[cfg(test)]
+pub(crate) fn fusion_disabled() -> bool {
+    DISABLED.with(|d| d.get())
 }
 
 /// `act(InstanceNorm(conv2d(x, weight) + bias))` on flex; `None` (nothing computed) on other

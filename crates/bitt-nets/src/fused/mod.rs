@@ -18,6 +18,9 @@
 //! [`conv_bias`] is the same mechanism for BTR's convolutions without a normalisation (the
 //! residual path's 1x1 projections and the head).
 //!
+//! [`resample`] holds the albedo U-Net's upsampling and the interleaving of its outermost
+//! level's output phases, as single passes.
+//!
 //! [`conv2d`] is the same mechanism for the image networks (albedo U-Net, light and HTML
 //! encoders): `act(InstanceNorm(conv2d(x) + bias))` as one operation, tiled im2col + GEMM
 //! and row passes in [`kernels2d`].
@@ -28,6 +31,7 @@ mod gemm;
 pub(crate) mod kernels;
 pub(crate) mod kernels2d;
 pub(crate) mod pool;
+pub(crate) mod resample;
 mod vectorized;
 
 use std::sync::Arc;

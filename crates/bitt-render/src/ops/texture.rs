@@ -90,6 +90,40 @@ impl TexturePlan {
         self.samples
     }
 
+    /// The same samples (corners and weights) of a texture stored as a table of texels:
+    /// `columns` `[Ht Wt]` gives, for every texel of the plan's texture (row-major), the
+    /// column of a `[C, K]` table that holds its value. The plan returned samples such tables
+    /// given as `[C, 1, K]` images, with the values [`TexturePlan::sample`] gives on the
+    /// texture the table stands for: a texture that is mostly unused (a UV layout's compact
+    /// texels) is then never expanded to its full size, and the gradient of a sample is
+    /// scattered into `K` texels rather than `Ht Wt`.
+    ///
+    /// # Shapes
+    /// columns `[Ht * Wt]`, values in `0..K`
+    ///
+    /// # Errors
+    /// `columns` of another length than the plan's texture, or `K = 0`.
+    pub fn through_columns(
+        &self,
+        columns: &Tensor<1, Int>,
+        table_len: usize,
+    ) -> Result<Self, RenderError> {
+        let want = self.height * self.width;
+        check_shape("texel columns", columns.dims(), [Some(want)], || {
+            format!("[{want}] (one per texel of the plan's texture)")
+        })?;
+        crate::error::check_image(table_len, 1)?;
+        let at = |k: usize| columns.clone().select(0, self.corners[k].clone());
+        Ok(Self {
+            height: 1,
+            width: table_len,
+            samples: self.samples,
+            corners: [at(0), at(1), at(2), at(3)],
+            fx: self.fx.clone(),
+            fy: self.fy.clone(),
+        })
+    }
+
     /// Samples `image` at the plan's UVs; differentiable in the image (and in the UVs the
     /// plan was made from, through its weights).
     ///

@@ -91,6 +91,19 @@ impl DenseGeometry {
         ))
     }
 
+    /// Replaces mesh `i`'s texture plan by `remap(i, plan)` ([`SceneGeometry::with_compact_textures`]).
+    ///
+    /// [`SceneGeometry::with_compact_textures`]: super::SceneGeometry::with_compact_textures
+    pub(super) fn remap_lookups(
+        &mut self,
+        remap: impl Fn(usize, &TexturePlan) -> Result<TexturePlan, RenderError>,
+    ) -> Result<(), RenderError> {
+        for (i, (_, plan)) in self.lookups.iter_mut().enumerate() {
+            *plan = remap(i, plan)?;
+        }
+        Ok(())
+    }
+
     /// Shades every pixel (each mesh's pixels from its own texture) and puts `background` on
     /// empty pixels.
     ///

@@ -10,6 +10,7 @@ use crate::ops::{
     AntialiasPlan, Raster, TexturePlan, Topology, float_tensor, index_tensor, interpolate,
     interpolate_with_faces, rasterize,
 };
+use bitt_texture::TextureLayout;
 
 /// Everything of a render that depends only on the meshes' vertices, the camera, the depth
 /// range, the antialiasing switch and the textures' sizes: the raster, the per-mesh masks,
@@ -49,6 +50,9 @@ pub struct SceneGeometry {
     topology: Option<Topology>,
     size: [usize; 2],
     texture_sizes: Vec<[usize; 2]>,
+    /// Per mesh, the texel count `T_i` of its compact texture when the geometry samples
+    /// compact textures ([`SceneGeometry::with_compact_textures`]); `None`: texture images.
+    compact: Option<Vec<usize>>,
     pixels: Pixels,
     antialias: Option<AntialiasPlan>,
 }
@@ -208,6 +212,7 @@ impl SceneGeometry {
                 topology: Some(scene.topology.clone()),
                 size,
                 texture_sizes: texture_sizes.to_vec(),
+                compact: None,
                 pixels: Pixels::Dense(pixels),
                 antialias,
             });
@@ -276,6 +281,7 @@ impl SceneGeometry {
             topology: None,
             size,
             texture_sizes: texture_sizes.to_vec(),
+            compact: None,
             pixels,
             antialias,
         })
@@ -320,6 +326,11 @@ impl SceneGeometry {
         material: &Material,
         background: [f32; 3],
     ) -> Result<Tensor<3>, RenderError> {
+        if self.compact.is_some() {
+            return Err(RenderError::BadLayout(
+                "this geometry samples compact textures (SceneGeometry::shade_compact)".into(),
+            ));
+        }
         crate::error::check_len("textures", textures.len(), self.texture_sizes.len())?;
         for (i, (t, want)) in textures.iter().zip(&self.texture_sizes).enumerate() {
             let [_, th, tw] = t.dims();
@@ -331,6 +342,107 @@ impl SceneGeometry {
                 });
             }
         }
+        self.shade_prepared(textures, light, material, background)
+    }
+
+    /// This geometry prepared to sample compact textures: mesh `i`'s texture is given to
+    /// [`SceneGeometry::shade_compact`] as the `[C, T_i]` texels of `layouts[i]` (its
+    /// compact order), and the texels the layout does not use read 0, as they do in
+    /// [`TextureLayout::compact_to_image`] with a black background. Shading then never
+    /// expands a texture to its `Ht x Wt` image: the samples read the compact texels
+    /// ([`TexturePlan::through_columns`]), and their gradient is scattered into `T_i`
+    /// texels. The images are the same as [`SceneGeometry::shade`] gives on the expanded
+    /// textures, and so are the gradients.
+    ///
+    /// # Errors
+    /// A layout count other than the meshes', or a layout of another size than the texture
+    /// size the geometry was made for.
+    pub fn with_compact_textures(
+        mut self,
+        layouts: &[&TextureLayout],
+    ) -> Result<Self, RenderError> {
+        crate::error::check_len("layouts", layouts.len(), self.texture_sizes.len())?;
+        let device = self.clip.device();
+        let mut columns = Vec::with_capacity(layouts.len());
+        for (i, (layout, &[h, w])) in layouts.iter().zip(&self.texture_sizes).enumerate() {
+            if [layout.height, layout.width] != [h, w] {
+                return Err(RenderError::BadLayout(format!(
+                    "mesh {i}'s layout is {} x {} texels; the geometry was made for {h} x {w}",
+                    layout.height, layout.width
+                )));
+            }
+            // Unused texels read the column after the compact ones, which holds 0.
+            let t = layout.num_texels();
+            let index: Vec<i64> = (0..h * w)
+                .map(|k| layout.compact_index(k / w, k % w).unwrap_or(t) as i64)
+                .collect();
+            columns.push((index_tensor(index, &device), t + 1));
+        }
+        let remap = |i: usize, plan: &TexturePlan| {
+            let (index, len) = &columns[i];
+            plan.through_columns(index, *len)
+        };
+        match &mut self.pixels {
+            Pixels::Empty => {}
+            Pixels::Covered(px) => {
+                for (i, plan) in &mut px.lookups {
+                    *plan = remap(*i, plan)?;
+                }
+            }
+            Pixels::Dense(px) => px.remap_lookups(remap)?,
+        }
+        self.compact = Some(layouts.iter().map(|l| l.num_texels()).collect());
+        Ok(self)
+    }
+
+    /// [`SceneGeometry::shade`] for a geometry made with
+    /// [`SceneGeometry::with_compact_textures`]: the same image from compact textures.
+    ///
+    /// # Shapes
+    /// textures: per mesh `[3, T_i]` (its layout's compact order) -> image `[3, H, W]`
+    ///
+    /// # Errors
+    /// A geometry not made for compact textures, or a texture count or size other than its
+    /// layouts'.
+    pub fn shade_compact(
+        &self,
+        textures: &[Tensor<2>],
+        light: &PointLight,
+        material: &Material,
+        background: [f32; 3],
+    ) -> Result<Tensor<3>, RenderError> {
+        let Some(texels) = &self.compact else {
+            return Err(RenderError::BadLayout(
+                "this geometry samples texture images (SceneGeometry::shade)".into(),
+            ));
+        };
+        crate::error::check_len("textures", textures.len(), texels.len())?;
+        let mut tables = Vec::with_capacity(textures.len());
+        for (i, (t, &want)) in textures.iter().zip(texels).enumerate() {
+            let [c, n] = t.dims();
+            if n != want {
+                return Err(RenderError::TensorShape {
+                    what: "compact texture",
+                    expected: format!("[3, {want}] for mesh {i}"),
+                    actual: t.dims().to_vec(),
+                });
+            }
+            // The unused texels' column.
+            let unused = Tensor::<2>::zeros([c, 1], &t.device());
+            tables.push(Tensor::cat(vec![t.clone(), unused], 1).reshape([c, 1, n + 1]));
+        }
+        self.shade_prepared(&tables, light, material, background)
+    }
+
+    /// Shading with textures whose sizes are checked (images, or compact tables `[C, 1,
+    /// T_i + 1]`).
+    fn shade_prepared(
+        &self,
+        textures: &[Tensor<3>],
+        light: &PointLight,
+        material: &Material,
+        background: [f32; 3],
+    ) -> Result<Tensor<3>, RenderError> {
         let device = self.clip.device();
         let [h, w] = self.size;
         let px = match &self.pixels {

@@ -13,9 +13,9 @@ use burn::tensor::{Device, Tensor, TensorData};
 
 use super::Rng;
 use crate::scene::{
-    Camera, DepthRange, LightValues, Material, PointLight, RenderSettings, Scene, SceneGeometry,
-    TexelSurface, TexelVisibilityStats, TexturedMesh, UnwrapPlan, UnwrapSettings, phong, render,
-    unwrap,
+    Camera, DepthRange, GeometryPath, LightValues, Material, PointLight, RenderSettings, Scene,
+    SceneGeometry, TexelSurface, TexelVisibilityStats, TexturedMesh, UnwrapPlan, UnwrapSettings,
+    phong, render, unwrap,
 };
 
 fn tensor2(values: Vec<f32>, shape: [usize; 2], device: &Device) -> Tensor<2> {
@@ -671,6 +671,158 @@ fn a_reused_scene_geometry_shades_like_render() {
             )
             .unwrap_err();
         assert!(err.to_string().contains("texture"), "{name}: {err}");
+    }
+}
+
+/// A geometry prepared for compact textures ([`SceneGeometry::with_compact_textures`])
+/// shades a layout's compact texels as the plain geometry shades the texture images they
+/// expand to (unused texels black), on both per-pixel paths: the same image, and the same
+/// gradients to the texels, the light and the vertices. Mixing the two kinds of texture, a
+/// compact texture of the wrong size and a layout of the wrong size are errors.
+#[test]
+fn compact_textures_shade_like_the_images_they_expand_to() {
+    for (name, device) in autodiff_devices() {
+        let s = hand_scene(40);
+        let scene = Scene::new(&[&s.meshes[0], &s.meshes[1]]).unwrap();
+        let mut rng = Rng::new(11);
+        let t = s.layouts[0].num_texels();
+        assert_eq!(t, s.layouts[1].num_texels(), "{name}: one texel order");
+        let compact = |rng: &mut Rng| {
+            let v = (0..3 * t).map(|_| rng.uniform(0.0, 1.0) as f32).collect();
+            Tensor::<2>::from_data(TensorData::new(v, [3, t]), &device).require_grad()
+        };
+        let textures = [compact(&mut rng), compact(&mut rng)];
+        let weights = Tensor::<3>::from_data(
+            TensorData::new(
+                (0..3 * 40 * 40)
+                    .map(|_| rng.uniform(0.0, 1.0) as f32)
+                    .collect(),
+                [3, 40, 40],
+            ),
+            &device,
+        );
+        let settings = RenderSettings::default();
+        let layouts = [&s.layouts[0], &s.layouts[1]];
+        for path in [GeometryPath::Covered, GeometryPath::Dense] {
+            let verts = [
+                vertex_tensor(&s.vertices[0], &device).require_grad(),
+                vertex_tensor(&s.vertices[1], &device).require_grad(),
+            ];
+            let light_t = Tensor::<1>::from_data(
+                TensorData::new(LightValues::default().to_array().to_vec(), [12]),
+                &device,
+            )
+            .require_grad();
+            let light = PointLight::from_tensor(light_t.clone()).unwrap();
+            let geometry = || {
+                SceneGeometry::with_path(&scene, &verts, &s.camera, &settings, &[[64, 64]; 2], path)
+                    .unwrap()
+            };
+            let plain = geometry();
+            let prepared = geometry().with_compact_textures(&layouts).unwrap();
+            let images: Vec<Tensor<3>> = textures
+                .iter()
+                .zip(layouts)
+                .map(|(c, l)| l.compact_to_image_tensor(c.clone(), [0.0; 3]))
+                .collect();
+            let expanded = plain
+                .shade(&images, &light, &settings.material, settings.background)
+                .unwrap();
+            let direct = prepared
+                .shade_compact(&textures, &light, &settings.material, settings.background)
+                .unwrap();
+            let (a, b) = (to_vec(expanded.clone()), to_vec(direct.clone()));
+            assert!(
+                a.iter().any(|&v| v > 0.05),
+                "{name} {path:?}: the hands are lit"
+            );
+            let max = a
+                .iter()
+                .zip(&b)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0, f32::max);
+            assert!(max <= 1e-6, "{name} {path:?}: images differ by {max}");
+            // One loss over both images: each part's gradient is read from its own inputs.
+            let g = ((expanded + direct) * weights.clone()).sum().backward();
+            let both = [
+                to_vec(textures[0].grad(&g).unwrap()),
+                to_vec(textures[1].grad(&g).unwrap()),
+                to_vec(light_t.grad(&g).unwrap()),
+                to_vec(verts[0].grad(&g).unwrap()),
+                to_vec(verts[1].grad(&g).unwrap()),
+            ];
+            // The expanded render alone, on fresh inputs of the same values.
+            let fresh = |x: &Tensor<2>| x.clone().detach().require_grad();
+            let alone_textures = [fresh(&textures[0]), fresh(&textures[1])];
+            let alone_light = light_t.clone().detach().require_grad();
+            let alone_verts = [fresh(&verts[0]), fresh(&verts[1])];
+            let light = PointLight::from_tensor(alone_light.clone()).unwrap();
+            let images: Vec<Tensor<3>> = alone_textures
+                .iter()
+                .zip(layouts)
+                .map(|(c, l)| l.compact_to_image_tensor(c.clone(), [0.0; 3]))
+                .collect();
+            let alone = SceneGeometry::with_path(
+                &scene,
+                &alone_verts,
+                &s.camera,
+                &settings,
+                &[[64, 64]; 2],
+                path,
+            )
+            .unwrap()
+            .shade(&images, &light, &settings.material, settings.background)
+            .unwrap();
+            let g = (alone * weights.clone()).sum().backward();
+            let one = [
+                to_vec(alone_textures[0].grad(&g).unwrap()),
+                to_vec(alone_textures[1].grad(&g).unwrap()),
+                to_vec(alone_light.grad(&g).unwrap()),
+                to_vec(alone_verts[0].grad(&g).unwrap()),
+                to_vec(alone_verts[1].grad(&g).unwrap()),
+            ];
+            for (k, (x, y)) in one.iter().zip(&both).enumerate() {
+                let scale = x.iter().map(|v| v.abs()).fold(1e-3, f32::max);
+                assert!(scale > 1e-3, "{name} {path:?}: gradient {k} is not zero");
+                let max = x
+                    .iter()
+                    .zip(y)
+                    .map(|(p, q)| (2.0 * p - q).abs())
+                    .fold(0.0, f32::max);
+                assert!(
+                    max <= 1e-5 * scale,
+                    "{name} {path:?}: gradient {k} differs by {max} (scale {scale})"
+                );
+            }
+            let light = PointLight::from_tensor(light_t.clone().detach()).unwrap();
+            let m = &settings.material;
+            let err = prepared.shade(&images, &light, m, [0.0; 3]).unwrap_err();
+            assert!(err.to_string().contains("compact"), "{name}: {err}");
+            let err = plain
+                .shade_compact(&textures, &light, m, [0.0; 3])
+                .unwrap_err();
+            assert!(err.to_string().contains("images"), "{name}: {err}");
+            let short = Tensor::<2>::zeros([3, t - 1], &device);
+            let err = prepared
+                .shade_compact(&[short.clone(), short], &light, m, [0.0; 3])
+                .unwrap_err();
+            assert!(
+                err.to_string().contains(&format!("[3, {t}]")),
+                "{name}: {err}"
+            );
+        }
+        let right = procedural_pair();
+        let uv = right.get(Side::Right).uv.as_ref().unwrap();
+        let small = TextureLayout::from_uv(uv, 32, 32, 1).unwrap();
+        let verts = [
+            vertex_tensor(&s.vertices[0], &device),
+            vertex_tensor(&s.vertices[1], &device),
+        ];
+        let err = SceneGeometry::new(&scene, &verts, &s.camera, &settings, &[[64, 64]; 2])
+            .unwrap()
+            .with_compact_textures(&[&small, &small])
+            .unwrap_err();
+        assert!(err.to_string().contains("32 x 32"), "{name}: {err}");
     }
 }
 

@@ -92,7 +92,6 @@ pub fn render_textures(
     let tex = |v: &Vec<f32>| Tensor::<2>::from_data(TensorData::new(v.clone(), [3, t]), device);
     let r = geometry.render(
         assets,
-        &assets.gather(device),
         [tex(&textures[0]), tex(&textures[1])],
         &light.to_light(device),
         &RenderSettings::default(),

@@ -46,7 +46,6 @@ pub fn silhouettes(
     };
     let r = geometry.render(
         assets,
-        &assets.gather(device),
         [zeros.clone(), zeros],
         &LightValues::default().to_light(device),
         &settings,
