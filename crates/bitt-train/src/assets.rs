@@ -135,10 +135,9 @@ struct Occlusion {
     factors: Arc<Vec<f32>>,
 }
 
-/// What identifies a [`SceneGeometry`] of one view: depth range, antialiasing, texture side,
-/// per-pixel layout, and whether it samples compact textures
-/// ([`SceneGeometry::with_compact_textures`]).
-type CacheKey = (DepthRange, bool, usize, GeometryPath, bool);
+/// What identifies a [`SceneGeometry`] of one view: depth range, antialiasing, per-pixel
+/// layout (the texture size is the assets').
+type CacheKey = (DepthRange, bool, GeometryPath);
 
 /// The [`SceneGeometry`]s made so far, with their keys.
 type CacheEntries = Vec<(CacheKey, Arc<SceneGeometry>)>;
@@ -274,47 +273,19 @@ impl ViewGeometry {
         self.occlusion.as_ref().map(|o| o.factors.as_slice())
     }
 
-    /// The render geometry of this view for `settings`, square textures of side
-    /// `texture_size` and a per-pixel layout, made on first use and then reused.
+    /// The render geometry of this view for `settings` and a per-pixel layout, prepared
+    /// for the compact textures of `assets.layouts`
+    /// ([`SceneGeometry::with_compact_textures`]), made on first use and then reused.
     ///
     /// # Errors
     /// As [`SceneGeometry::new`].
-    pub fn scene_geometry(
-        &self,
-        assets: &HandAssets,
-        settings: &RenderSettings,
-        texture_size: usize,
-        path: GeometryPath,
-    ) -> Result<Arc<SceneGeometry>, TrainError> {
-        self.cached_geometry(assets, settings, texture_size, path, false)
-    }
-
-    /// The geometry of [`ViewGeometry::scene_geometry`] (the assets' texture size) prepared
-    /// for the compact textures of `assets.layouts`, cached alike.
     fn compact_geometry(
         &self,
         assets: &HandAssets,
         settings: &RenderSettings,
         path: GeometryPath,
     ) -> Result<Arc<SceneGeometry>, TrainError> {
-        self.cached_geometry(assets, settings, assets.texture_size, path, true)
-    }
-
-    fn cached_geometry(
-        &self,
-        assets: &HandAssets,
-        settings: &RenderSettings,
-        texture_size: usize,
-        path: GeometryPath,
-        compact: bool,
-    ) -> Result<Arc<SceneGeometry>, TrainError> {
-        let key = (
-            settings.depth,
-            settings.antialias,
-            texture_size,
-            path,
-            compact,
-        );
+        let key = (settings.depth, settings.antialias, path);
         let mut cache = self.cache.0.lock().unwrap_or_else(|e| e.into_inner());
         if let Some((_, g)) = cache.iter().find(|(k, _)| *k == key) {
             return Ok(g.clone());
@@ -326,18 +297,16 @@ impl ViewGeometry {
                 &self.vertices[0].device(),
             )
         });
-        let mut g = SceneGeometry::with_occlusion(
+        let g = SceneGeometry::with_occlusion(
             &assets.scene,
             &self.vertices,
             occlusion,
             &self.camera,
             settings,
-            &[[texture_size; 2]; 2],
+            &[[assets.texture_size; 2]; 2],
             path,
-        )?;
-        if compact {
-            g = g.with_compact_textures(&[&assets.layouts[0], &assets.layouts[1]])?;
-        }
+        )?
+        .with_compact_textures(&[&assets.layouts[0], &assets.layouts[1]])?;
         let g = Arc::new(g);
         cache.push((key, g.clone()));
         Ok(g)

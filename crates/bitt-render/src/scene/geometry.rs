@@ -355,12 +355,17 @@ impl SceneGeometry {
     /// textures, and so are the gradients.
     ///
     /// # Errors
-    /// A layout count other than the meshes', or a layout of another size than the texture
-    /// size the geometry was made for.
+    /// A layout count other than the meshes', a layout of another size than the texture
+    /// size the geometry was made for, or a geometry already prepared.
     pub fn with_compact_textures(
         mut self,
         layouts: &[&TextureLayout],
     ) -> Result<Self, RenderError> {
+        if self.compact.is_some() {
+            return Err(RenderError::BadLayout(
+                "this geometry already samples compact textures".into(),
+            ));
+        }
         crate::error::check_len("layouts", layouts.len(), self.texture_sizes.len())?;
         let device = self.clip.device();
         let mut columns = Vec::with_capacity(layouts.len());

@@ -802,6 +802,11 @@ fn compact_textures_shade_like_the_images_they_expand_to() {
                 .shade_compact(&textures, &light, m, [0.0; 3])
                 .unwrap_err();
             assert!(err.to_string().contains("images"), "{name}: {err}");
+            let err = prepared
+                .clone()
+                .with_compact_textures(&layouts)
+                .unwrap_err();
+            assert!(err.to_string().contains("already"), "{name}: {err}");
             let short = Tensor::<2>::zeros([3, t - 1], &device);
             let err = prepared
                 .shade_compact(&[short.clone(), short], &light, m, [0.0; 3])
