@@ -1,10 +1,21 @@
 //! A bounds-checked, safe front to the `gemm` crate (the GEMM burn's flex backend uses).
 //!
-//! This is the workspace's only `unsafe` code: `gemm::gemm` takes raw pointers and strides.
-//! [`matmul`] checks that every element the strides address lies inside its slice, and the
-//! borrow rules keep the destination from aliasing the operands, which is all `gemm::gemm`
-//! requires.
+//! This is the workspace's only `unsafe` library code: `gemm::gemm` takes raw pointers and
+//! strides. [`matmul`] checks that every element the strides address lies inside its slice,
+//! and the borrow rules keep the destination from aliasing the operands, which is all
+//! `gemm::gemm` requires.
+//!
+//! [`products_into_new`] builds a new buffer from GEMMs without clearing it first: clearing
+//! a fresh output before a GEMM overwrote it was a sixth of BTR's step at the `quick`
+//! preset (110 buffers per step, written twice). The GEMMs write into the buffer's
+//! uninitialised capacity through [`Columns`], which records the columns each product
+//! overwrote, lets a product accumulate only onto columns already written, and checks that
+//! every column of every sample was written before the buffer's length is set.
 #![allow(unsafe_code)]
+
+use std::mem::MaybeUninit;
+
+use rayon::prelude::*;
 
 /// A strided, read-only matrix: element `(i, j)` is `data[i * row_stride + j * col_stride]`.
 #[derive(Debug, Clone, Copy)]
@@ -37,6 +48,31 @@ fn fits(len: usize, rows: usize, cols: usize, row_stride: usize, col_stride: usi
             .is_some_and(|last| last < len)
 }
 
+/// Panics unless a `[rows, cols]` view with these strides stays inside `len` elements and
+/// its strides fit in `isize` (what `gemm::gemm` takes).
+fn check_view(what: &str, len: usize, [rows, cols]: [usize; 2], [rs, cs]: [usize; 2]) {
+    assert!(
+        fits(len, rows, cols, rs, cs),
+        "{what} view [{rows}, {cols}] with strides ({rs}, {cs}) exceeds {len} elements"
+    );
+    assert!(
+        isize::try_from(rs).is_ok() && isize::try_from(cs).is_ok(),
+        "{what} strides overflow"
+    );
+}
+
+/// [`check_view`] for both operands of a product.
+fn check_operands(caller: &str, lhs: MatRef<'_>, rhs: MatRef<'_>) {
+    for (what, m) in [("lhs", lhs), ("rhs", rhs)] {
+        check_view(
+            &format!("{caller} {what}"),
+            m.data.len(),
+            [m.rows, m.cols],
+            [m.row_stride, m.col_stride],
+        );
+    }
+}
+
 /// `dst = lhs rhs` (or `dst += lhs rhs` when `accumulate`), multi-threaded on rayon's pool
 /// when `parallel` and the product is large.
 ///
@@ -57,20 +93,13 @@ pub(crate) fn matmul(
         dst.cols,
         rhs.rows
     );
-    for (what, len, rows, cols, rs, cs) in [
-        ("dst", dst.data.len(), m, n, dst.row_stride, dst.col_stride),
-        ("lhs", lhs.data.len(), m, k, lhs.row_stride, lhs.col_stride),
-        ("rhs", rhs.data.len(), k, n, rhs.row_stride, rhs.col_stride),
-    ] {
-        assert!(
-            fits(len, rows, cols, rs, cs),
-            "matmul: {what} view [{rows}, {cols}] with strides ({rs}, {cs}) exceeds {len} elements"
-        );
-        assert!(
-            isize::try_from(rs).is_ok() && isize::try_from(cs).is_ok(),
-            "matmul: {what} strides overflow"
-        );
-    }
+    check_view(
+        "matmul dst",
+        dst.data.len(),
+        [m, n],
+        [dst.row_stride, dst.col_stride],
+    );
+    check_operands("matmul", lhs, rhs);
     if m == 0 || n == 0 {
         return;
     }
@@ -84,21 +113,51 @@ pub(crate) fn matmul(
         }
         return;
     }
+    // SAFETY: the checks above keep every element addressed through the strides (which fit
+    // in `isize`) inside its slice; `dst` is a unique borrow of initialised values, so it
+    // aliases neither operand and may be read.
+    unsafe {
+        gemm_into(
+            dst.data.as_mut_ptr(),
+            [dst.row_stride, dst.col_stride],
+            lhs,
+            rhs,
+            accumulate,
+            parallel,
+        );
+    }
+}
+
+/// `dst = lhs rhs` (`dst += lhs rhs` when `accumulate`) through `gemm::gemm`.
+///
+/// # Safety
+/// `lhs` and `rhs` have been checked to fit their slices (`fits`) and `k > 0`, `m, n > 0`.
+/// Every element `dst + i * strides[0] + j * strides[1]` (`i < m`, `j < n`) is valid for
+/// writes, owned by the caller alone, and when `accumulate` holds an initialised value.
+/// Without `accumulate` gemm writes each of them before it reads it (its `alpha` is zero).
+unsafe fn gemm_into(
+    dst: *mut f32,
+    strides: [usize; 2],
+    lhs: MatRef<'_>,
+    rhs: MatRef<'_>,
+    accumulate: bool,
+    parallel: bool,
+) {
+    let (m, n, k) = (lhs.rows, rhs.cols, lhs.cols);
     let parallelism = if parallel && m.saturating_mul(n).saturating_mul(k) >= 1 << 20 {
         gemm::Parallelism::Rayon(0)
     } else {
         gemm::Parallelism::None
     };
-    // SAFETY: the checks above keep every element addressed through the strides (which fit
-    // in `isize`) inside its slice; `dst` is a unique borrow, so it aliases neither operand.
+    // SAFETY: as the caller guarantees.
     unsafe {
         gemm::gemm(
             m,
             n,
             k,
-            dst.data.as_mut_ptr(),
-            dst.col_stride as isize,
-            dst.row_stride as isize,
+            dst,
+            strides[1] as isize,
+            strides[0] as isize,
             accumulate,
             lhs.data.as_ptr(),
             lhs.col_stride as isize,
@@ -114,6 +173,147 @@ pub(crate) fn matmul(
             parallelism,
         );
     }
+}
+
+/// One sample's `[rows, len]` part of a buffer that [`products_into_new`] fills: GEMMs
+/// write whole columns of it (every row) and it records which.
+#[derive(Debug)]
+pub(crate) struct Columns<'a> {
+    data: &'a mut [MaybeUninit<f32>],
+    rows: usize,
+    len: usize,
+    /// Column ranges `[from, to)` overwritten so far.
+    written: Vec<(usize, usize)>,
+}
+
+impl Columns<'_> {
+    /// Columns `[from, from + rhs.cols)` = `lhs rhs` (every row), or `+=` when `accumulate`,
+    /// which needs those columns written before.
+    ///
+    /// # Panics
+    /// When the shapes disagree, the columns leave the buffer, an operand view leaves its
+    /// slice, or `accumulate` reaches columns not yet written.
+    pub(crate) fn product(
+        &mut self,
+        from: usize,
+        lhs: MatRef<'_>,
+        rhs: MatRef<'_>,
+        accumulate: bool,
+        parallel: bool,
+    ) {
+        let (m, n, k) = (lhs.rows, rhs.cols, lhs.cols);
+        assert!(
+            m == self.rows && rhs.rows == k && from.checked_add(n).is_some_and(|e| e <= self.len),
+            "Columns::product: [{}, {from}..+{n}] of [{}, {}] = [{m}, {k}] x [{}, {n}]",
+            self.rows,
+            self.rows,
+            self.len,
+            rhs.rows
+        );
+        check_operands("Columns::product", lhs, rhs);
+        if accumulate {
+            assert!(
+                covered(&self.written, from, from + n),
+                "Columns::product: accumulating onto columns {from}..{} not written yet",
+                from + n
+            );
+        }
+        if m == 0 || n == 0 {
+            return;
+        }
+        if k == 0 {
+            if !accumulate {
+                for i in 0..m {
+                    self.data[i * self.len + from..i * self.len + from + n]
+                        .fill(MaybeUninit::new(0.0));
+                }
+                self.written.push((from, from + n));
+            }
+            return;
+        }
+        // SAFETY: the operands fit their slices (checked above) and `k, m, n > 0`. The
+        // destination's elements `from + i * len + j` (`i < rows`, `j < n`, `from + n <=
+        // len`) lie inside `data` (`rows * len` long), which this value borrows uniquely;
+        // with `accumulate` they were all written by an earlier product (checked above).
+        unsafe {
+            gemm_into(
+                self.data.as_mut_ptr().cast::<f32>().add(from),
+                [self.len, 1],
+                lhs,
+                rhs,
+                accumulate,
+                parallel,
+            );
+        }
+        if !accumulate {
+            self.written.push((from, from + n));
+        }
+    }
+}
+
+/// Whether the ranges cover `[from, to)`.
+fn covered(ranges: &[(usize, usize)], from: usize, to: usize) -> bool {
+    let mut sorted = ranges.to_vec();
+    sorted.sort_unstable();
+    let mut reach = from;
+    for (a, b) in sorted {
+        if a <= reach {
+            reach = reach.max(b);
+        }
+    }
+    reach >= to
+}
+
+/// A new `[samples, rows, len]` buffer whose every sample `fill` writes with products
+/// ([`Columns::product`]), not cleared first. The samples run on rayon's threads when
+/// `in_parallel`, else in order; `init` makes each task's scratch state.
+///
+/// # Panics
+/// When a sample's columns are not all written (nothing is returned then), or `fill` panics.
+pub(crate) fn products_into_new<S>(
+    samples: usize,
+    rows: usize,
+    len: usize,
+    in_parallel: bool,
+    init: impl Fn() -> S + Sync + Send,
+    fill: impl Fn(&mut S, usize, &mut Columns<'_>) + Sync + Send,
+) -> Vec<f32> {
+    let size = rows * len;
+    let total = samples * size;
+    let mut out: Vec<f32> = Vec::with_capacity(total);
+    if total > 0 {
+        let run = |state: &mut S, (b, data): (usize, &mut [MaybeUninit<f32>])| {
+            let mut columns = Columns {
+                data,
+                rows,
+                len,
+                written: Vec::new(),
+            };
+            fill(state, b, &mut columns);
+            assert!(
+                covered(&columns.written, 0, len),
+                "products_into_new: sample {b} has columns left unwritten"
+            );
+        };
+        let spare = &mut out.spare_capacity_mut()[..total];
+        if in_parallel {
+            spare
+                .par_chunks_exact_mut(size)
+                .enumerate()
+                .for_each_init(&init, run);
+        } else {
+            let mut state = init();
+            spare
+                .chunks_exact_mut(size)
+                .enumerate()
+                .for_each(|item| run(&mut state, item));
+        }
+    }
+    // SAFETY: `total <= capacity`, and every sample's `rows * len` elements were written:
+    // each product overwrote every row of its columns, and the columns of every sample
+    // cover `[0, len)` (asserted above; a failed assertion unwinds before this line).
+    unsafe { out.set_len(total) };
+    out
 }
 
 #[cfg(test)]
@@ -153,6 +353,114 @@ mod tests {
         assert_eq!(out, [-2.0, 5.5, -2.0, 16.0]);
         matmul(dst(&mut out), lhs, rhs, true, false);
         assert_eq!(out, [-4.0, 11.0, -4.0, 32.0]);
+    }
+
+    /// A buffer built by products equals the same products into a cleared buffer, in
+    /// parallel and in order, with overwriting blocks and accumulating taps.
+    #[test]
+    fn products_into_new_equal_products_into_a_cleared_buffer() {
+        let (rows, k, len, samples) = (3, 4, 37, 3);
+        let lhs: Vec<f32> = (0..rows * k).map(|i| i as f32 * 0.25 - 1.0).collect();
+        let src: Vec<f32> = (0..samples * k * len)
+            .map(|i| ((i * 7) % 11) as f32 - 5.0)
+            .collect();
+        let lhs = MatRef {
+            data: &lhs,
+            rows,
+            cols: k,
+            row_stride: k,
+            col_stride: 1,
+        };
+        let cols = |b: usize, from: usize, n: usize| MatRef {
+            data: &src[b * k * len + from..],
+            rows: k,
+            cols: n,
+            row_stride: len,
+            col_stride: 1,
+        };
+        // Columns in two blocks (0..20, 20..37), then a second product added onto 5..30.
+        let mut want = vec![0.0f32; samples * rows * len];
+        for b in 0..samples {
+            let dst = &mut want[b * rows * len..];
+            for (from, n) in [(0, 20), (20, 17)] {
+                let view = MatMut {
+                    data: &mut dst[from..],
+                    rows,
+                    cols: n,
+                    row_stride: len,
+                    col_stride: 1,
+                };
+                matmul(view, lhs, cols(b, from, n), false, false);
+            }
+            let view = MatMut {
+                data: &mut dst[5..],
+                rows,
+                cols: 25,
+                row_stride: len,
+                col_stride: 1,
+            };
+            matmul(view, lhs, cols(b, 0, 25), true, false);
+        }
+        for in_parallel in [false, true] {
+            let got = products_into_new(
+                samples,
+                rows,
+                len,
+                in_parallel,
+                || (),
+                |(), b, dst| {
+                    dst.product(20, lhs, cols(b, 20, 17), false, !in_parallel);
+                    dst.product(0, lhs, cols(b, 0, 20), false, !in_parallel);
+                    dst.product(5, lhs, cols(b, 0, 25), true, !in_parallel);
+                },
+            );
+            assert_eq!(got, want, "in_parallel {in_parallel}");
+        }
+    }
+
+    /// Fills `samples` samples of `[2, 4]` with products of ones over the column ranges
+    /// `(from, accumulate)`, each two columns wide.
+    fn fill_ones(samples: usize, products: &[(usize, bool)]) -> Vec<f32> {
+        let ones = [1.0f32; 4];
+        let m = MatRef {
+            data: &ones,
+            rows: 2,
+            cols: 2,
+            row_stride: 2,
+            col_stride: 1,
+        };
+        products_into_new(
+            samples,
+            2,
+            4,
+            samples > 1,
+            || (),
+            |(), _, dst| {
+                for &(from, accumulate) in products {
+                    dst.product(from, m, m, accumulate, false);
+                }
+            },
+        )
+    }
+
+    #[test]
+    fn products_of_ones_fill_their_columns() {
+        assert_eq!(fill_ones(2, &[(0, false), (2, false), (1, true)]), {
+            let sample = [2.0, 4.0, 4.0, 2.0];
+            [sample, sample, sample, sample].concat()
+        });
+    }
+
+    #[test]
+    #[should_panic(expected = "not written yet")]
+    fn accumulating_onto_unwritten_columns_is_refused() {
+        fill_ones(1, &[(0, false), (1, true)]);
+    }
+
+    #[test]
+    #[should_panic(expected = "left unwritten")]
+    fn a_sample_with_unwritten_columns_is_refused() {
+        fill_ones(2, &[(0, false)]);
     }
 
     #[test]

@@ -8,7 +8,7 @@
 use pulp::Arch;
 use rayon::prelude::*;
 
-use super::gemm::{MatMut, MatRef, matmul};
+use super::gemm::{Columns, MatMut, MatRef, matmul, products_into_new};
 use super::vectorized::vectorized;
 
 /// Sizes of a stride-1, zero-padded ("same") 1-D convolution over a batch.
@@ -73,20 +73,10 @@ fn columns(data: &[f32], rows: usize, len: usize, from: usize, cols: usize) -> M
     }
 }
 
-fn columns_mut(data: &mut [f32], rows: usize, len: usize, from: usize, cols: usize) -> MatMut<'_> {
-    MatMut {
-        data: &mut data[from..],
-        rows,
-        cols,
-        row_stride: len,
-        col_stride: 1,
-    }
-}
-
 /// [`shifted_products`] for every sample of a batch: `src` is `[batch, rows_in, len]`, the
-/// result `[batch, rows_out, len]`. The samples run on rayon's threads with single-threaded
-/// GEMMs when there are at least as many as threads (BTR's two hands on two cores), else
-/// one at a time with multi-threaded GEMMs.
+/// result `[batch, rows_out, len]` (a new buffer the products overwrite, never cleared). The
+/// samples run on rayon's threads with single-threaded GEMMs when there are at least as many
+/// as threads (BTR's two hands on two cores), else one at a time with multi-threaded GEMMs.
 fn batched_products(
     src: &[f32],
     batch: usize,
@@ -94,23 +84,22 @@ fn batched_products(
     len: usize,
     taps: &[(MatRef<'_>, isize)],
 ) -> Vec<f32> {
-    let mut dst = super::zeros(batch * rows_out * len);
-    if dst.is_empty() {
-        return dst;
+    if batch * rows_out * len == 0 {
+        return Vec::new();
     }
     let rows_in = src.len() / (batch * len);
-    let pairs = src
-        .chunks_exact(rows_in * len)
-        .zip(dst.chunks_exact_mut(rows_out * len));
-    if batch >= rayon::current_num_threads() {
-        let pairs: Vec<_> = pairs.collect();
-        pairs
-            .into_par_iter()
-            .for_each(|(s, d)| shifted_products(d, s, len, taps, false));
-    } else {
-        pairs.for_each(|(s, d)| shifted_products(d, s, len, taps, true));
-    }
-    dst
+    let in_parallel = batch >= rayon::current_num_threads();
+    products_into_new(
+        batch,
+        rows_out,
+        len,
+        in_parallel,
+        || (),
+        |(), b, dst| {
+            let s = &src[b * rows_in * len..(b + 1) * rows_in * len];
+            shifted_products(dst, s, len, taps, !in_parallel);
+        },
+    )
 }
 
 /// Input channels up to which [`shifted_products`] stacks the shifted inputs into one GEMM
@@ -121,12 +110,12 @@ const IM2COL_MAX_CHANNELS: usize = 64;
 const IM2COL_BLOCK: usize = 2048;
 
 /// For one sample, `dst[:, t] = sum_i A_i src[:, t + offset_i]` with `src` zero outside
-/// `[0, len)`; `dst` must be zeros on entry.
+/// `[0, len)`; every column of `dst` is written.
 ///
 /// # Shapes
 /// - `dst`: `[rows_out, len]`; `src`: `[rows_in, len]`; each `A_i`: `[rows_out, rows_in]`
 fn shifted_products(
-    dst: &mut [f32],
+    dst: &mut Columns<'_>,
     src: &[f32],
     len: usize,
     taps: &[(MatRef<'_>, isize)],
@@ -142,9 +131,10 @@ fn shifted_products(
     }
 }
 
-/// [`shifted_products`] as one GEMM per tap, accumulating into `dst`.
+/// [`shifted_products`] as one GEMM per tap: the first (the centre, offset 0, every column)
+/// overwrites `dst`, the others accumulate onto it.
 fn per_tap_products(
-    dst: &mut [f32],
+    dst: &mut Columns<'_>,
     src: &[f32],
     len: usize,
     taps: &[(MatRef<'_>, isize)],
@@ -154,8 +144,8 @@ fn per_tap_products(
         let (lo, hi) = valid_columns(len, offset);
         if hi > lo {
             let from = (lo as isize + offset) as usize;
-            matmul(
-                columns_mut(dst, a.rows, len, lo, hi - lo),
+            dst.product(
+                lo,
                 a,
                 columns(src, a.cols, len, from, hi - lo),
                 n > 0,
@@ -167,7 +157,7 @@ fn per_tap_products(
 
 /// [`shifted_products`] as one GEMM per block of texels over the stacked shifted inputs.
 fn stacked_products(
-    dst: &mut [f32],
+    dst: &mut Columns<'_>,
     src: &[f32],
     len: usize,
     taps: &[(MatRef<'_>, isize)],
@@ -209,8 +199,8 @@ fn stacked_products(
                 }
             }
         }
-        matmul(
-            columns_mut(dst, rows_out, len, t0, cols),
+        dst.product(
+            t0,
             combined,
             MatRef {
                 data: &stacked[..k * cols],
@@ -503,21 +493,18 @@ pub(crate) fn norm_silu_forward(
     };
     let maps = row_maps(bias, gamma, beta, &stats, d);
     // Pass 2: y = silu(z scale + shift).
-    let mut y = super::zeros(rows * d.len);
-    y.par_chunks_exact_mut(d.len)
-        .zip(z.par_chunks_exact(d.len))
-        .enumerate()
-        .for_each(|(row, (yr, zr))| {
-            let (s, h) = (maps.scale[row], maps.shift[row]);
-            vectorized!(arch, <'a> (
-                yr: &'a mut [f32] = yr, zr: &'a [f32] = zr, s: f32 = s, h: f32 = h,
-            ) -> () {
-                for (y, &z) in yr.iter_mut().zip(zr) {
-                    let a = z * s + h;
-                    *y = a * sigmoid(a);
-                }
-            });
+    let y = super::rows_by_blocks(rows, d.len, |row, from, yr| {
+        let (s, h) = (maps.scale[row], maps.shift[row]);
+        let zr = &z[row * d.len + from..][..yr.len()];
+        vectorized!(arch, <'a> (
+            yr: &'a mut [f32] = yr, zr: &'a [f32] = zr, s: f32 = s, h: f32 = h,
+        ) -> () {
+            for (y, &z) in yr.iter_mut().zip(zr) {
+                let a = z * s + h;
+                *y = a * sigmoid(a);
+            }
         });
+    });
     (y, stats)
 }
 
@@ -747,10 +734,26 @@ mod tests {
                         (a, o)
                     })
                     .collect();
-                let mut a = vec![0.0; rows_out * len];
-                let mut b = vec![0.0; rows_out * len];
-                per_tap_products(&mut a, &src, len, &taps, false);
-                stacked_products(&mut b, &src, len, &taps, [rows_out, rows_in], true);
+                let a = products_into_new(
+                    1,
+                    rows_out,
+                    len,
+                    false,
+                    || (),
+                    |(), _, dst| {
+                        per_tap_products(dst, &src, len, &taps, false);
+                    },
+                );
+                let b = products_into_new(
+                    1,
+                    rows_out,
+                    len,
+                    false,
+                    || (),
+                    |(), _, dst| {
+                        stacked_products(dst, &src, len, &taps, [rows_out, rows_in], true);
+                    },
+                );
                 assert_close(&b, &a, 1e-5, "stacked vs per tap");
             }
         }

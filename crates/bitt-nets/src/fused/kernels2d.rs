@@ -16,7 +16,7 @@
 use pulp::Arch;
 use rayon::prelude::*;
 
-use super::gemm::{MatMut, MatRef, matmul};
+use super::gemm::{MatMut, MatRef, matmul, products_into_new};
 use super::vectorized::vectorized;
 
 /// Sizes of a 2-D convolution with symmetric zero padding and no dilation or groups.
@@ -254,58 +254,46 @@ pub(crate) fn conv2d_forward(x: &[f32], weight: &[f32], bias: &[f32], d: Conv2dD
         "conv2d_forward: bias"
     );
     let (pixels, k) = (d.pixels(), d.patch());
-    let mut z = super::zeros(d.batch * d.c_out * pixels);
-    if z.is_empty() {
-        return z;
+    if d.batch * d.c_out * pixels == 0 {
+        return Vec::new();
     }
     let w = d.weight(weight);
-    // One sample: `z_b = W col_b`, tile by tile (`parallel`: multi-threaded GEMMs).
-    let sample = |xb: &[f32], zb: &mut [f32], col: &mut [f32], parallel: bool| {
-        for p0 in (0..pixels).step_by(d.tile()) {
-            let n = d.tile().min(pixels - p0);
-            let cols = if d.pointwise() {
-                xb
-            } else {
-                im2col(xb, &d, p0, n, col);
-                &col[..k * n]
-            };
-            matmul(
-                MatMut {
-                    data: &mut zb[p0..],
-                    rows: d.c_out,
-                    cols: n,
-                    row_stride: pixels,
-                    col_stride: 1,
-                },
-                w,
-                MatRef {
-                    data: cols,
-                    rows: k,
-                    cols: n,
-                    row_stride: if d.pointwise() { pixels } else { n },
-                    col_stride: 1,
-                },
-                false,
-                parallel,
-            );
-        }
-    };
-    if samples_in_parallel(d.batch) {
-        x.par_chunks_exact(d.c_in * d.plane())
-            .zip(z.par_chunks_exact_mut(d.c_out * pixels))
-            .for_each_init(
-                || d.col_buffer(),
-                |col, (xb, zb)| sample(xb, zb, col, false),
-            );
-    } else {
-        let mut col = d.col_buffer();
-        for (xb, zb) in x
-            .chunks_exact(d.c_in * d.plane())
-            .zip(z.chunks_exact_mut(d.c_out * pixels))
-        {
-            sample(xb, zb, &mut col, true);
-        }
-    }
+    let in_parallel = samples_in_parallel(d.batch);
+    let sample_len = d.c_in * d.plane();
+    // One sample: `z_b = W col_b`, tile by tile (multi-threaded GEMMs when the samples run
+    // in order). The products overwrite a new buffer, never cleared.
+    let mut z = products_into_new(
+        d.batch,
+        d.c_out,
+        pixels,
+        in_parallel,
+        || d.col_buffer(),
+        |col, b, zb| {
+            let xb = &x[b * sample_len..(b + 1) * sample_len];
+            for p0 in (0..pixels).step_by(d.tile()) {
+                let n = d.tile().min(pixels - p0);
+                let cols = if d.pointwise() {
+                    &xb[p0..]
+                } else {
+                    im2col(xb, &d, p0, n, col);
+                    &col[..k * n]
+                };
+                zb.product(
+                    p0,
+                    w,
+                    MatRef {
+                        data: cols,
+                        rows: k,
+                        cols: n,
+                        row_stride: if d.pointwise() { pixels } else { n },
+                        col_stride: 1,
+                    },
+                    false,
+                    !in_parallel,
+                );
+            }
+        },
+    );
     if !bias.is_empty() {
         z.par_chunks_exact_mut(pixels)
             .enumerate()
@@ -674,20 +662,18 @@ pub(crate) fn post_forward(
         None => (vec![0.0; rows], vec![1.0; rows]),
     };
     let stats = RowStats { mean, rstd };
-    let mut y = super::zeros(z.len());
-    y.par_chunks_exact_mut(len)
-        .zip(z.par_chunks_exact(len))
-        .enumerate()
-        .for_each(|(row, (yr, zr))| {
-            let (s, h) = stats.map(row, gamma, beta, &d);
-            let act = d.act;
-            vectorized!(arch, <'a> (
-                yr: &'a mut [f32] = yr, zr: &'a [f32] = zr, s: f32 = s, h: f32 = h,
-                act: Activation = act,
-            ) -> () {
-                map_row(yr, zr, s, h, act)
-            });
+    let filled_rows = if z.is_empty() { 0 } else { rows };
+    let y = super::rows_by_blocks(filled_rows, len, |row, from, yr| {
+        let (s, h) = stats.map(row, gamma, beta, &d);
+        let act = d.act;
+        let zr = &z[row * len + from..][..yr.len()];
+        vectorized!(arch, <'a> (
+            yr: &'a mut [f32] = yr, zr: &'a [f32] = zr, s: f32 = s, h: f32 = h,
+            act: Activation = act,
+        ) -> () {
+            map_row(yr, zr, s, h, act)
         });
+    });
     (y, stats)
 }
 

@@ -308,6 +308,46 @@ fn values(t: &FlexTensor) -> Vec<f32> {
         .to_vec()
 }
 
+/// Floats per block of [`rows_by_blocks`].
+const ROW_BLOCK: usize = 256;
+
+/// A new `[rows, len]` buffer computed block by block on rayon's threads, never cleared
+/// (clearing a buffer that a pass then overwrites cost as much as the pass): `f(row, from,
+/// out)` writes the row's values at `[from, from + out.len())`. The blocks are collected in
+/// place (rayon's indexed `collect`), so every value is written once.
+pub(crate) fn rows_by_blocks(
+    rows: usize,
+    len: usize,
+    f: impl Fn(usize, usize, &mut [f32]) + Sync,
+) -> Vec<f32> {
+    use rayon::prelude::*;
+    let total = rows * len;
+    if total == 0 {
+        return Vec::new();
+    }
+    let blocks: Vec<[f32; ROW_BLOCK]> = (0..total.div_ceil(ROW_BLOCK))
+        .into_par_iter()
+        .with_min_len(16)
+        .map(|i| {
+            let mut out = [0.0f32; ROW_BLOCK];
+            let start = i * ROW_BLOCK;
+            let end = (start + ROW_BLOCK).min(total);
+            // A block may span the end of one row and the start of the next.
+            let mut p = start;
+            while p < end {
+                let (row, from) = (p / len, p % len);
+                let n = (len - from).min(end - p);
+                f(row, from, &mut out[p - start..p - start + n]);
+                p += n;
+            }
+            out
+        })
+        .collect();
+    let mut out = blocks.into_flattened();
+    out.truncate(total);
+    out
+}
+
 /// A zeroed output buffer of `len` floats, cleared by rayon's threads in parallel. The
 /// allocator keeps freed memory, so a large buffer comes back dirty and must be cleared; one
 /// thread clearing it (what `vec![0.0; len]` does) kept the other core idle.
@@ -323,4 +363,35 @@ pub(crate) fn zeros(len: usize) -> Vec<f32> {
 
 fn flex_tensor<const D: usize>(values: Vec<f32>, shape: [usize; D]) -> FlexTensor {
     FlexTensor::from_data(TensorData::new(values, shape))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Rows shorter and longer than a block, blocks across rows and a ragged end: every
+    /// value written once, at its place.
+    #[test]
+    fn rows_by_blocks_writes_every_value_at_its_place() {
+        for (rows, len) in [
+            (1, 1),
+            (3, 5),
+            (2, 255),
+            (2, 256),
+            (3, 257),
+            (5, 700),
+            (0, 9),
+            (4, 0),
+        ] {
+            let got = rows_by_blocks(rows, len, |row, from, out| {
+                for (k, v) in out.iter_mut().enumerate() {
+                    *v = (row * 10_000 + from + k) as f32;
+                }
+            });
+            let want: Vec<f32> = (0..rows)
+                .flat_map(|r| (0..len).map(move |t| (r * 10_000 + t) as f32))
+                .collect();
+            assert_eq!(got, want, "rows {rows} len {len}");
+        }
+    }
 }

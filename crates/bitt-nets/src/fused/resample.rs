@@ -87,42 +87,27 @@ fn upsample2_on_flex(x: &Tensor<4>) -> Option<Tensor<4>> {
 /// `[rows, w]` -> `[2 rows, 2 w]`: each input row becomes two output rows, each value two
 /// neighbours.
 fn upsample_rows(x: &[f32], rows: usize, w: usize) -> Vec<f32> {
-    let mut y = super::zeros(4 * rows * w);
-    if w == 0 {
-        return y;
-    }
-    y.par_chunks_exact_mut(4 * w)
-        .zip(x.par_chunks_exact(w))
-        .for_each(|(out, row)| {
-            let (top, bottom) = out.split_at_mut(2 * w);
-            for (pair, &v) in top.chunks_exact_mut(2).zip(row) {
-                pair[0] = v;
-                pair[1] = v;
-            }
-            bottom.copy_from_slice(top);
-        });
-    y
+    super::rows_by_blocks(2 * rows, 2 * w, |r, from, out| {
+        let row = &x[(r / 2) * w..(r / 2 + 1) * w];
+        for (k, v) in out.iter_mut().enumerate() {
+            *v = row[(from + k) / 2];
+        }
+    })
 }
 
 /// The gradient of [`upsample_rows`]: `[2 rows, 2 w]` -> `[rows, w]`, each input the sum of
 /// its four outputs, added as burn's `expand` backward adds them (over the row pair first,
 /// then over the column pair).
 fn downsample_rows(g: &[f32], rows: usize, w: usize) -> Vec<f32> {
-    let mut dx = super::zeros(rows * w);
-    if w == 0 {
-        return dx;
-    }
-    dx.par_chunks_exact_mut(w)
-        .zip(g.par_chunks_exact(4 * w))
-        .for_each(|(out, pair)| {
-            let (top, bottom) = pair.split_at(2 * w);
-            for (j, d) in out.iter_mut().enumerate() {
-                let left = top[2 * j] + bottom[2 * j];
-                let right = top[2 * j + 1] + bottom[2 * j + 1];
-                *d = left + right;
-            }
-        });
-    dx
+    super::rows_by_blocks(rows, w, |r, from, out| {
+        let (top, bottom) = g[r * 4 * w..(r + 1) * 4 * w].split_at(2 * w);
+        for (k, d) in out.iter_mut().enumerate() {
+            let j = from + k;
+            let left = top[2 * j] + bottom[2 * j];
+            let right = top[2 * j + 1] + bottom[2 * j + 1];
+            *d = left + right;
+        }
+    })
 }
 
 #[derive(Debug)]
@@ -231,19 +216,13 @@ fn source_row(d: PhaseDims, r: usize) -> [usize; 2] {
 }
 
 fn interleave(x: &[f32], d: PhaseDims) -> Vec<f32> {
-    let w2 = 2 * d.w;
-    let mut y = super::zeros(d.rows() * w2);
-    if w2 == 0 {
-        return y;
-    }
-    y.par_chunks_exact_mut(w2).enumerate().for_each(|(r, row)| {
+    super::rows_by_blocks(d.rows(), 2 * d.w, |r, from, out| {
         let starts = source_row(d, r);
-        for (j, pair) in row.chunks_exact_mut(2).enumerate() {
-            pair[0] = x[starts[0] + j];
-            pair[1] = x[starts[1] + j];
+        for (k, v) in out.iter_mut().enumerate() {
+            let j = from + k;
+            *v = x[starts[j % 2] + j / 2];
         }
-    });
-    y
+    })
 }
 
 /// The gradient of [`interleave`]: each output's gradient back at its input, zero at the
