@@ -182,10 +182,10 @@ pub struct Btr {
     head2: TexelConv,
     #[module(skip)]
     bidirectional: bool,
-    /// Pools with the fused operation on flex ([`ConvImpl::Fused`]), burn's `max_pool1d`
-    /// otherwise.
+    /// Pools and upsamples with the fused operations on flex ([`ConvImpl::Fused`]); burn's
+    /// `max_pool1d` and an `expand` otherwise.
     #[module(skip)]
-    fused_pool: bool,
+    fused_texel_ops: bool,
 }
 
 /// BTR's output: the full texel vectors of both hands, values in `(0, 1)`.
@@ -266,17 +266,9 @@ impl BtrConfig {
             head1: head(ch[0], self.head_channels),
             head2: head(self.head_channels, self.channels_out),
             bidirectional: self.bidirectional,
-            fused_pool: self.conv == ConvImpl::Fused,
+            fused_texel_ops: self.conv == ConvImpl::Fused,
         }
     }
-}
-
-/// Nearest-neighbour x2 upsampling along the last axis: `[N, C, L] -> [N, C, 2L]`.
-fn upsample2(x: Tensor<3>) -> Tensor<3> {
-    let [n, c, l] = x.dims();
-    x.unsqueeze_dim::<4>(3)
-        .expand([n, c, l, 2])
-        .reshape([n, c, 2 * l])
 }
 
 /// The other hand's features: the two halves of the batch swapped. With one sample per
@@ -321,7 +313,7 @@ impl Btr {
             h = level.block2.forward(level.block1.forward(h));
             lengths.push(h.dims()[2]);
             h = match self
-                .fused_pool
+                .fused_texel_ops
                 .then(|| fused::pool::max_pool_half(&h))
                 .flatten()
             {
@@ -341,7 +333,14 @@ impl Btr {
             };
             let skip = skips.pop().expect("one skip per level");
             h = level.block1.forward(Tensor::cat(vec![h, other, skip], 1));
-            h = upsample2(h);
+            h = match self
+                .fused_texel_ops
+                .then(|| fused::resample::upsample2_texels_on_flex(&h))
+                .flatten()
+            {
+                Some(up) => up,
+                None => fused::resample::upsample2_texels_composed(h),
+            };
             let target = lengths.pop().expect("one length per level");
             let len = h.dims()[2];
             if len < target {

@@ -1,9 +1,11 @@
-//! The albedo U-Net's two resampling steps as custom burn operations on flex, each one pass
-//! forward and one backward:
+//! The albedo U-Net's two resampling steps and BTR's texel upsampling as custom burn
+//! operations on flex, each one pass forward and one backward:
 //!
 //! - [`upsample2`]: nearest-neighbour x2 upsampling. Composed from burn operations it is a
 //!   `reshape`, an `expand` and a `reshape`, whose last step copies the stride-0 view
 //!   element by element, and whose backward pass is two `sum_dim`s over strided axes.
+//! - [`upsample2_texels_on_flex`]: the same along BTR's texel axis (`[N, C, L] -> [N, C, 2L]`), one
+//!   `expand` and one `sum_dim`, composed.
 //! - [`interleave_phases`]: the outermost level's four output phases
 //!   (`albedo::outermost_up`) woven into the full-resolution image. Composed, it is four
 //!   slices, four copies and three concatenations; its backward pass zeroes a buffer the
@@ -26,12 +28,12 @@ use super::{FlexAutodiff, autodiff_output, contiguous, flex_tensor};
 
 /// Runs a one-input data-movement operation on flex, with its backward `op` registered when
 /// the input is tracked; `None` off flex or off `f32`.
-fn run<Op: Backward<Flex, 1>>(
-    x: &Tensor<4>,
+fn run<const D: usize, Op: Backward<Flex, 1>>(
+    x: &Tensor<D>,
     op: Op,
     state: Op::State,
     forward: impl FnOnce(&[f32]) -> FlexTensor,
-) -> Option<Tensor<4>> {
+) -> Option<Tensor<D>> {
     #[cfg(test)]
     if super::conv2d::fusion_disabled() {
         return None;
@@ -108,6 +110,59 @@ fn downsample_rows(g: &[f32], rows: usize, w: usize) -> Vec<f32> {
             *d = left + right;
         }
     })
+}
+
+/// Nearest-neighbour x2 upsampling along the last axis as burn operations (any backend).
+///
+/// # Shapes
+/// - `x`: `[N, C, L]`
+/// - output: `[N, C, 2L]`
+pub(crate) fn upsample2_texels_composed(x: Tensor<3>) -> Tensor<3> {
+    let [n, c, l] = x.dims();
+    x.unsqueeze_dim::<4>(3)
+        .expand([n, c, l, 2])
+        .reshape([n, c, 2 * l])
+}
+
+/// [`upsample2_texels_composed`] in one pass on flex (backward one pass too); `None`
+/// (nothing computed) elsewhere.
+pub(crate) fn upsample2_texels_on_flex(x: &Tensor<3>) -> Option<Tensor<3>> {
+    let shape = x.dims();
+    let [n, c, l] = shape;
+    run(x, UpsampleTexelsBackward, shape, |x| {
+        let y = super::rows_by_blocks(n * c, 2 * l, |r, from, out| {
+            let row = &x[r * l..(r + 1) * l];
+            for (k, v) in out.iter_mut().enumerate() {
+                *v = row[(from + k) / 2];
+            }
+        });
+        flex_tensor(y, [n, c, 2 * l])
+    })
+}
+
+#[derive(Debug)]
+struct UpsampleTexelsBackward;
+
+impl Backward<Flex, 1> for UpsampleTexelsBackward {
+    type State = [usize; 3];
+
+    fn backward(self, ops: Ops<Self::State, 1>, grads: &mut Gradients, _: &mut Checkpointer) {
+        let [node_x] = ops.parents;
+        let shape = ops.state;
+        let [n, c, l] = shape;
+        let gy = contiguous(&grads.consume::<Flex>(&ops.node));
+        if let Some(node) = node_x {
+            let g = gy.as_slice::<f32>().expect("contiguous f32");
+            // Each texel's gradient: its two copies' gradients added.
+            let dx = super::rows_by_blocks(n * c, l, |r, from, out| {
+                let pairs = &g[2 * (r * l + from)..];
+                for (k, d) in out.iter_mut().enumerate() {
+                    *d = pairs[2 * k] + pairs[2 * k + 1];
+                }
+            });
+            grads.register::<Flex>(node.id, flex_tensor(dx, shape));
+        }
+    }
 }
 
 #[derive(Debug)]
@@ -313,6 +368,25 @@ mod tests {
             let b = x.grad(&(theirs * wt).sum().backward()).unwrap();
             assert_eq!(values(a), values(b), "interleave gradient {co} {h} {w}");
         }
+        for shape in [[2, 3, 5], [1, 1, 1], [2, 8, 300]] {
+            let x = input([shape[0], shape[1], 1, shape[2]], &device)
+                .reshape(shape)
+                .require_grad();
+            let ours = upsample2_texels_on_flex(&x).expect("runs on flex");
+            let theirs = upsample2_texels_composed(x.clone());
+            assert_eq!(
+                values(ours.clone().unsqueeze()),
+                values(theirs.clone().unsqueeze())
+            );
+            let w = ours.clone().detach() * 3.0 + 0.5;
+            let a = x.grad(&(ours * w.clone()).sum().backward()).unwrap();
+            let b = x.grad(&(theirs * w).sum().backward()).unwrap();
+            assert_eq!(
+                values(a.unsqueeze()),
+                values(b.unsqueeze()),
+                "texels {shape:?}"
+            );
+        }
         let plain = input([2, 8, 4, 3], &Device::flex());
         assert_eq!(
             values(upsample2_on_flex(&plain).unwrap()),
@@ -330,6 +404,8 @@ mod tests {
             for device in [other.clone(), other.autodiff()] {
                 let x = input([1, 4, 2, 2], &device);
                 assert!(upsample2_on_flex(&x).is_none(), "{name}");
+                let t = x.clone().reshape([1, 4, 4]);
+                assert!(upsample2_texels_on_flex(&t).is_none(), "{name}");
                 assert!(interleave_on_flex(&x, 1).is_none(), "{name}");
             }
         }
