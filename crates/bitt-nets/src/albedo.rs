@@ -37,6 +37,7 @@ use burn::tensor::{Device, Tensor};
 
 use crate::NetsError;
 use crate::conv_block::{Activation, conv_act, conv_norm_act};
+use crate::fused::concat::{Middle, cat_channels};
 use crate::fused::resample::{interleave_phases, upsample2};
 
 /// Configuration of [`AlbedoNet`].
@@ -264,12 +265,17 @@ impl AlbedoNet {
                 skips.push(h.clone());
             }
         }
-        // Up, innermost first: each inner level returns [its input, its up path].
+        // Up, innermost first: each inner level returns [its input, its up path], which the
+        // next level's up path rectifies first (on flex in the concatenation's pass).
+        let mut rectified = true;
         for (i, level) in self.levels.iter().enumerate().rev() {
-            h = level.up(h, i + 1 == n);
+            h = level.up(h, rectified);
             if i > 0 {
                 let skip = skips.pop().expect("one skip per inner level");
-                h = Tensor::cat(vec![skip, h], 1);
+                (h, rectified) = match cat_channels(&skip, Middle::Nothing, &h, true) {
+                    Some(joined) => (joined, true),
+                    None => (Tensor::cat(vec![skip, h], 1), false),
+                };
             }
         }
         h

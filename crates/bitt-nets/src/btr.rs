@@ -29,13 +29,14 @@
 use burn::config::Config;
 use burn::module::Module;
 use burn::nn::{GroupNorm, GroupNormConfig};
-use burn::tensor::activation::{sigmoid, silu};
+use burn::tensor::activation::silu;
 use burn::tensor::module::max_pool1d;
 use burn::tensor::ops::MaxPoolOptions;
 use burn::tensor::{Device, Tensor};
 
 use crate::NetsError;
 use crate::conv1d::{ConvImpl, TexelConv, TexelConvConfig};
+use crate::fused::concat::Middle;
 use crate::fused::{self, BlockParams};
 
 /// Configuration of [`Btr`].
@@ -103,6 +104,33 @@ impl ResBlock1d {
     /// - `x`: `[N, C_in, L]`
     /// - output: `[N, C_out, L]`
     pub fn forward(&self, x: Tensor<3>) -> Tensor<3> {
+        if let Some(y) = self.fused(&x) {
+            return y;
+        }
+        self.composed(x)
+    }
+
+    /// The block as one operation ([`fused::res_block`]) with [`ConvImpl::Fused`] on flex.
+    fn fused(&self, x: &Tensor<3>) -> Option<Tensor<3>> {
+        let convs = [Some(&self.conv1), Some(&self.conv2), self.skip.as_ref()];
+        if convs
+            .iter()
+            .flatten()
+            .any(|c| c.implementation != ConvImpl::Fused)
+        {
+            return None;
+        }
+        let first = block_params(&self.conv1, &self.norm1)?;
+        let second = block_params(&self.conv2, &self.norm2)?;
+        let skip = self.skip.as_ref().map(|conv| fused::res_block::SkipParams {
+            weight: conv.weight.val(),
+            bias: conv.bias.val(),
+        });
+        fused::res_block::res_block(x, &first, &second, skip.as_ref())
+    }
+
+    /// The block from its parts: two [`conv_norm_silu`] and the residual's sum.
+    fn composed(&self, x: Tensor<3>) -> Tensor<3> {
         let h = conv_norm_silu(&self.conv1, &self.norm1, x.clone());
         let h = conv_norm_silu(&self.conv2, &self.norm2, h);
         let residual = match &self.skip {
@@ -125,19 +153,10 @@ impl ResBlock1d {
 /// With [`ConvImpl::Fused`] on flex the whole block is one custom operation (`fused`).
 fn conv_norm_silu(conv: &TexelConv, norm: &GroupNorm, x: Tensor<3>) -> Tensor<3> {
     if conv.implementation == ConvImpl::Fused
-        && let (Some(gamma), Some(beta)) = (&norm.gamma, &norm.beta)
+        && let Some(params) = block_params(conv, norm)
+        && let Some(y) = fused::conv_norm_silu(&x, &params)
     {
-        let params = BlockParams {
-            weight: conv.weight.val(),
-            bias: conv.bias.val(),
-            gamma: gamma.val(),
-            beta: beta.val(),
-            groups: norm.num_groups,
-            epsilon: norm.epsilon,
-        };
-        if let Some(y) = fused::conv_norm_silu(&x, &params) {
-            return y;
-        }
+        return y;
     }
     let z = conv.forward_without_bias(x);
     let [n, c, _] = z.dims();
@@ -162,6 +181,22 @@ fn conv_norm_silu(conv: &TexelConv, norm: &GroupNorm, x: Tensor<3>) -> Tensor<3>
         scale = scale * gamma;
     }
     silu(z * scale + shift)
+}
+
+/// The fused operations' view of a convolution and its group norm; `None` when the norm has
+/// no affine parameters.
+fn block_params(conv: &TexelConv, norm: &GroupNorm) -> Option<BlockParams> {
+    let (Some(gamma), Some(beta)) = (&norm.gamma, &norm.beta) else {
+        return None;
+    };
+    Some(BlockParams {
+        weight: conv.weight.val(),
+        bias: conv.bias.val(),
+        gamma: gamma.val(),
+        beta: beta.val(),
+        groups: norm.num_groups,
+        epsilon: norm.epsilon,
+    })
 }
 
 /// Two ResNet blocks of one encoder or decoder level.
@@ -326,13 +361,27 @@ impl Btr {
             h = block.forward(h);
         }
         for level in &self.decoder {
-            let other = if self.bidirectional {
-                swap_hands(h.clone())
-            } else {
-                h.zeros_like()
-            };
             let skip = skips.pop().expect("one skip per level");
-            h = level.block1.forward(Tensor::cat(vec![h, other, skip], 1));
+            let input = self
+                .fused_texel_ops
+                .then(|| {
+                    let middle = if self.bidirectional {
+                        Middle::SwappedHalves
+                    } else {
+                        Middle::Zeros
+                    };
+                    fused::concat::cat_channels(&h, middle, &skip, false)
+                })
+                .flatten();
+            let input = input.unwrap_or_else(|| {
+                let other = if self.bidirectional {
+                    swap_hands(h.clone())
+                } else {
+                    h.zeros_like()
+                };
+                Tensor::cat(vec![h, other, skip], 1)
+            });
+            h = level.block1.forward(input);
             h = match self
                 .fused_texel_ops
                 .then(|| fused::resample::upsample2_texels_on_flex(&h))
@@ -349,7 +398,7 @@ impl Btr {
             }
             h = level.block2.forward(h);
         }
-        let out = sigmoid(self.head2.forward(self.head1.forward(h)));
+        let out = self.head2.forward_sigmoid(self.head1.forward(h));
         BtrOutput {
             left: out.clone().narrow(0, 0, b),
             right: out.narrow(0, b, b),
@@ -580,6 +629,60 @@ mod tests {
             to_vec(conv2.weight.grad(&g).unwrap())
         };
         assert_close(&dw, &reference, 2e-4, "untracked input");
+    }
+
+    /// A whole ResNet block as one operation gives the composed block's values and every
+    /// gradient bit for bit (the same kernels, each sum one `f32` addition), with the
+    /// identity and with the projection on the residual path; so does inference, and an
+    /// input that is not tracked.
+    #[test]
+    fn fused_res_block_equals_the_composed_block_bit_for_bit() {
+        use burn::module::Param;
+        let ad = Device::flex().autodiff();
+        for (c_in, c_out) in [(8, 8), (3, 8), (24, 16)] {
+            let mut block = ResBlock1d::new(c_in, c_out, 8, ConvImpl::Fused, &ad);
+            for (i, norm) in [&mut block.norm1, &mut block.norm2].into_iter().enumerate() {
+                let seed = 40 + 2 * i as u64;
+                norm.gamma = Some(Param::from_tensor(
+                    random([c_out], seed, &ad).add_scalar(1.0),
+                ));
+                norm.beta = Some(Param::from_tensor(random([c_out], seed + 1, &ad)));
+            }
+            let x = random([2, c_in, 29], 50, &ad)
+                .add_scalar(0.4)
+                .require_grad();
+            let w = random([2, c_out, 29], 51, &ad);
+            let what = format!("{c_in} -> {c_out}");
+            let fused = block.fused(&x).expect("flex takes the fused path");
+            let composed = block.composed(x.clone());
+            let mut gradients = Vec::new();
+            for y in [fused, composed] {
+                let grads = (y.clone() * w.clone()).sum().backward();
+                let mut all = vec![to_vec(y.inner()), to_vec(x.grad(&grads).unwrap())];
+                all.extend(crate::test_util::param_grads(&block, &grads));
+                gradients.push(all);
+            }
+            assert_eq!(gradients[0].len(), if c_in == c_out { 10 } else { 12 });
+            for (i, (a, b)) in gradients[0].iter().zip(&gradients[1]).enumerate() {
+                assert_eq!(a, b, "{what}: value {i} (0: output, 1: input gradient)");
+            }
+            // Inference on flex, and an untracked input on the autodiff device.
+            let device = Device::flex();
+            let plain = ResBlock1d::new(c_in, c_out, 8, ConvImpl::Fused, &device)
+                .load_record(block.clone().into_record());
+            let xp = random([2, c_in, 29], 50, &device).add_scalar(0.4);
+            let y = plain.fused(&xp).expect("flex takes the fused path");
+            assert_eq!(to_vec(y), to_vec(plain.composed(xp)), "{what}: inference");
+            let untracked = random([1, c_in, 9], 52, &ad);
+            let grads = block.forward(untracked.clone()).sum().backward();
+            assert!(untracked.grad(&grads).is_none());
+            let reference = block.composed(untracked).sum().backward();
+            assert_eq!(
+                to_vec(block.conv1.weight.grad(&grads).unwrap()),
+                to_vec(block.conv1.weight.grad(&reference).unwrap()),
+                "{what}: untracked input"
+            );
+        }
     }
 
     /// The whole network with the fused blocks equals the composed one on flex.

@@ -22,9 +22,12 @@
 use burn::config::Config;
 use burn::module::{Module, Param};
 use burn::nn::Initializer;
+use burn::tensor::activation::sigmoid;
 use burn::tensor::module::conv1d;
 use burn::tensor::ops::{ConvOptions, PadMode};
 use burn::tensor::{Device, Tensor};
+
+use crate::fused::conv_bias::{Output, conv_bias};
 
 /// How [`TexelConv`] evaluates the convolution. All variants compute the same function with
 /// the same parameters; they differ only in speed.
@@ -36,9 +39,9 @@ pub enum ConvImpl {
     ShiftedSum,
     /// burn's `conv1d` (reference; slow on CPU at BTR's sizes).
     Burn,
-    /// When the tensors live on flex (the CPU default; see `fused`): inside BTR's ResNet blocks
-    /// the convolution, group norm and SiLU run as one custom operation with a hand-written
-    /// backward pass, and a plain convolution plus bias as another; elsewhere as
+    /// When the tensors live on flex (the CPU default; see `fused`): each of BTR's ResNet
+    /// blocks (convolutions, group norms, SiLU, residual) runs as one custom operation with a
+    /// hand-written backward pass, and a plain convolution plus bias as another; elsewhere as
     /// [`ConvImpl::ShiftedSum`]. The default.
     Fused,
 }
@@ -115,12 +118,25 @@ impl TexelConv {
             );
         }
         if self.implementation == ConvImpl::Fused
-            && let Some(y) =
-                crate::fused::conv_bias::conv_bias(&x, &self.weight.val(), &self.bias.val())
+            && let Some(y) = conv_bias(&x, &self.weight.val(), &self.bias.val(), Output::Linear)
         {
             return y;
         }
         self.forward_without_bias(x) + self.bias.val().reshape([1, c_out, 1])
+    }
+
+    /// `sigmoid(self.forward(x))`, as one operation with [`ConvImpl::Fused`] on flex.
+    ///
+    /// # Shapes
+    /// - `x`: `[B, C_in, T]`
+    /// - output: `[B, C_out, T]`, in `(0, 1)`
+    pub fn forward_sigmoid(&self, x: Tensor<3>) -> Tensor<3> {
+        if self.implementation == ConvImpl::Fused
+            && let Some(y) = conv_bias(&x, &self.weight.val(), &self.bias.val(), Output::Sigmoid)
+        {
+            return y;
+        }
+        sigmoid(self.forward(x))
     }
 
     /// The convolution without the bias term (callers that fold the bias into a following
@@ -174,44 +190,53 @@ mod tests {
     use super::*;
     use bitt_testkit::{assert_close, devices, random, to_vec};
 
-    /// Values and gradients (input, weight, bias) of the matmul forms equal burn's conv1d.
+    /// Values and gradients (input, weight, bias) of the matmul forms equal burn's conv1d,
+    /// plain and through a sigmoid ([`TexelConv::forward_sigmoid`]).
     #[test]
     fn matmul_conv_matches_burn_conv1d_values_and_gradients() {
         for (name, device) in devices() {
             let ad = device.clone().autodiff();
             for &(c_in, c_out, k, t) in &[(3, 8, 3, 11), (5, 4, 1, 7), (4, 6, 3, 1), (2, 3, 5, 9)] {
-                let mut reference: Option<[Vec<f32>; 4]> = None;
-                for implementation in [
-                    ConvImpl::Burn,
-                    ConvImpl::Im2col,
-                    ConvImpl::ShiftedSum,
-                    ConvImpl::Fused,
-                ] {
-                    let conv = TexelConvConfig::new(c_in, c_out, k)
-                        .with_implementation(implementation)
-                        .init(&ad);
-                    // Same parameters for every variant.
-                    let conv = TexelConv {
-                        weight: Param::from_tensor(random([c_out, c_in, k], 1, &ad)),
-                        bias: Param::from_tensor(random([c_out], 2, &ad)),
-                        ..conv
-                    };
-                    let x = random([2, c_in, t], 3, &ad).require_grad();
-                    let y = conv.forward(x.clone());
-                    assert_eq!(y.dims(), [2, c_out, t]);
-                    let weights = random([2, c_out, t], 4, &ad);
-                    let grads = (y.clone() * weights).sum().backward();
-                    let got = [
-                        to_vec(y.inner()),
-                        to_vec(x.grad(&grads).expect("x grad")),
-                        to_vec(conv.weight.grad(&grads).expect("w grad")),
-                        to_vec(conv.bias.grad(&grads).expect("b grad")),
-                    ];
-                    match &reference {
-                        None => reference = Some(got),
-                        Some(r) => {
-                            for (a, b) in got.iter().zip(r) {
-                                assert_close(a, b, 1e-4, &format!("{name} {implementation:?}"));
+                for through_sigmoid in [false, true] {
+                    let mut reference: Option<[Vec<f32>; 4]> = None;
+                    for implementation in [
+                        ConvImpl::Burn,
+                        ConvImpl::Im2col,
+                        ConvImpl::ShiftedSum,
+                        ConvImpl::Fused,
+                    ] {
+                        let conv = TexelConvConfig::new(c_in, c_out, k)
+                            .with_implementation(implementation)
+                            .init(&ad);
+                        // Same parameters for every variant.
+                        let conv = TexelConv {
+                            weight: Param::from_tensor(random([c_out, c_in, k], 1, &ad)),
+                            bias: Param::from_tensor(random([c_out], 2, &ad)),
+                            ..conv
+                        };
+                        let x = random([2, c_in, t], 3, &ad).require_grad();
+                        let y = if through_sigmoid {
+                            conv.forward_sigmoid(x.clone())
+                        } else {
+                            conv.forward(x.clone())
+                        };
+                        assert_eq!(y.dims(), [2, c_out, t]);
+                        let weights = random([2, c_out, t], 4, &ad);
+                        let grads = (y.clone() * weights).sum().backward();
+                        let got = [
+                            to_vec(y.inner()),
+                            to_vec(x.grad(&grads).expect("x grad")),
+                            to_vec(conv.weight.grad(&grads).expect("w grad")),
+                            to_vec(conv.bias.grad(&grads).expect("b grad")),
+                        ];
+                        match &reference {
+                            None => reference = Some(got),
+                            Some(r) => {
+                                for (a, b) in got.iter().zip(r) {
+                                    let what =
+                                        format!("{name} {implementation:?} {through_sigmoid}");
+                                    assert_close(a, b, 1e-4, &what);
+                                }
                             }
                         }
                     }

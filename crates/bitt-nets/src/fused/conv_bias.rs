@@ -1,6 +1,6 @@
-//! BTR's plain 1-D convolutions, `conv(x) + bias` without a normalisation (the ResNet
-//! blocks' 1x1 projections on the residual path and the head), as one custom burn operation
-//! on flex.
+//! BTR's plain 1-D convolutions, `conv(x) + bias` without a normalisation (the head, its
+//! last one through a sigmoid; the ResNet blocks' 1x1 projections when a block is not fused
+//! whole), as one custom burn operation on flex.
 //!
 //! Composed from burn operations this is a broadcast `matmul` and an add. burn runs the
 //! matmul's backward pass on the calling thread: two transposed copies and a GEMM whose long
@@ -23,16 +23,30 @@ use burn::backend::flex::FlexTensor;
 use burn::tensor::{DType, Tensor};
 use rayon::prelude::*;
 
-use super::kernels::{self, ConvDims};
+use super::kernels::{self, ConvDims, sigmoid};
 use super::{FlexAutodiff, autodiff_output, contiguous, flex_tensor, values};
 
-/// `conv(x) + bias` ("same" zero padding, stride 1) on flex; `None` (nothing computed) on
-/// other backends or dtypes.
+/// What [`conv_bias`] applies to `conv(x) + bias`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Output {
+    /// Nothing.
+    Linear,
+    /// The logistic sigmoid (BTR's head, whose texels lie in `(0, 1)`).
+    Sigmoid,
+}
+
+/// `conv(x) + bias` ("same" zero padding, stride 1), or its sigmoid, on flex; `None`
+/// (nothing computed) on other backends or dtypes.
 ///
 /// # Shapes
 /// - `x`: `[N, C_in, T]`; `weight`: `[C_out, C_in, K]`, `K` odd; `bias`: `[C_out]`
 /// - output: `[N, C_out, T]`
-pub(crate) fn conv_bias(x: &Tensor<3>, weight: &Tensor<3>, bias: &Tensor<1>) -> Option<Tensor<3>> {
+pub(crate) fn conv_bias(
+    x: &Tensor<3>,
+    weight: &Tensor<3>,
+    bias: &Tensor<1>,
+    output: Output,
+) -> Option<Tensor<3>> {
     let [c_out, c_in, kernel] = weight.dims();
     let [batch, x_channels, len] = x.dims();
     if x_channels != c_in || kernel % 2 == 0 || len == 0 || bias.dims() != [c_out] {
@@ -52,7 +66,7 @@ pub(crate) fn conv_bias(x: &Tensor<3>, weight: &Tensor<3>, bias: &Tensor<1>) -> 
         if !f32s(&[xa.primitive(), w.primitive(), b.primitive()]) {
             return None;
         }
-        let (y, saved) = forward(xa.primitive(), w.primitive(), b.primitive(), d);
+        let (y, saved) = forward(xa.primitive(), w.primitive(), b.primitive(), d, output);
         let nodes = [xa.node(), w.node(), b.node()];
         return Some(autodiff_output(ConvBiasBackward, nodes, saved, y));
     }
@@ -62,15 +76,19 @@ pub(crate) fn conv_bias(x: &Tensor<3>, weight: &Tensor<3>, bias: &Tensor<1>) -> 
     if !f32s(&[&xf, &wf, &bf]) {
         return None;
     }
-    Some(Tensor::from_primitive::<Flex>(forward(&xf, &wf, &bf, d).0))
+    Some(Tensor::from_primitive::<Flex>(
+        forward(&xf, &wf, &bf, d, output).0,
+    ))
 }
 
-/// What the backward pass keeps: the contiguous input and the weight's values.
+/// What the backward pass keeps: the contiguous input, the weight's values and, after a
+/// sigmoid, the output.
 #[derive(Debug, Clone)]
 struct Saved {
     x: FlexTensor,
     weight: Arc<Vec<f32>>,
     d: ConvDims,
+    sigmoid: Option<FlexTensor>,
 }
 
 /// The output `[N, C_out, T]` and the backward pass's state.
@@ -79,6 +97,7 @@ fn forward(
     weight: &FlexTensor,
     bias: &FlexTensor,
     d: ConvDims,
+    output: Output,
 ) -> (FlexTensor, Saved) {
     let x = contiguous(x);
     let weight = Arc::new(values(weight));
@@ -88,15 +107,27 @@ fn forward(
         .enumerate()
         .for_each(|(row, values)| {
             let b = bias[row % d.c_out];
-            values.iter_mut().for_each(|v| *v += b);
+            match output {
+                Output::Linear => values.iter_mut().for_each(|v| *v += b),
+                Output::Sigmoid => values.iter_mut().for_each(|v| *v = sigmoid(*v + b)),
+            }
         });
     let y = flex_tensor(y, [d.batch, d.c_out, d.len]);
-    (y, Saved { x, weight, d })
+    let sigmoid = (output == Output::Sigmoid).then(|| y.clone());
+    (
+        y,
+        Saved {
+            x,
+            weight,
+            d,
+            sigmoid,
+        },
+    )
 }
 
 /// The bias gradient: `dy` `[N, C_out, T]` summed over the samples and texels (each row in
 /// `f64`, the rows of a channel in sample order).
-fn bias_gradient(dy: &[f32], d: ConvDims) -> Vec<f32> {
+pub(super) fn bias_gradient(dy: &[f32], d: ConvDims) -> Vec<f32> {
     let rows: Vec<f64> = dy
         .par_chunks_exact(d.len)
         .map(|row| row.iter().map(|&v| f64::from(v)).sum())
@@ -117,7 +148,25 @@ impl Backward<Flex, 3> for ConvBiasBackward {
         let s = ops.state;
         let d = s.d;
         let gy = contiguous(&grads.consume::<Flex>(&ops.node));
-        let dy = gy.as_slice::<f32>().expect("contiguous f32");
+        let mut gy_pre;
+        let dy = match &s.sigmoid {
+            // Through the sigmoid: `dy = gy y (1 - y)`.
+            Some(y) => {
+                let (gy, y) = (gy.as_slice::<f32>(), y.as_slice::<f32>());
+                let (gy, y) = (gy.expect("contiguous f32"), y.expect("contiguous f32"));
+                gy_pre = gy.to_vec();
+                gy_pre
+                    .par_chunks_mut(1 << 14)
+                    .zip(y.par_chunks(1 << 14))
+                    .for_each(|(g, y)| {
+                        for (g, &y) in g.iter_mut().zip(y) {
+                            *g *= y * (1.0 - y);
+                        }
+                    });
+                &gy_pre[..]
+            }
+            None => gy.as_slice::<f32>().expect("contiguous f32"),
+        };
         if let Some(node) = node_bias {
             grads.register::<Flex>(node.id, flex_tensor(bias_gradient(dy, d), [d.c_out]));
         }

@@ -434,12 +434,23 @@ fn exp(x: f32) -> f32 {
 }
 
 #[inline(always)]
-fn sigmoid(a: f32) -> f32 {
+pub(crate) fn sigmoid(a: f32) -> f32 {
     1.0 / (1.0 + exp(-a))
 }
 
-/// `SiLU(GroupNorm(z + bias))` with the norm's `gamma`, `beta`: the output and the statistics
-/// the backward pass needs.
+/// A residual that [`norm_silu_forward`] adds to its output: `values + bias` (per channel),
+/// or `values` alone.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Residual<'a> {
+    /// `[batch, channels, len]`.
+    pub values: &'a [f32],
+    /// `[channels]`, added to `values` before they are added to the output.
+    pub bias: Option<&'a [f32]>,
+}
+
+/// `SiLU(GroupNorm(z + bias))` with the norm's `gamma`, `beta`, plus `residual` when given
+/// (a ResNet block's sum, in the same pass): the output and the statistics the backward pass
+/// needs.
 ///
 /// # Shapes
 /// - `z`: `[batch, channels, len]`; `bias`, `gamma`, `beta`: `[channels]`
@@ -450,9 +461,14 @@ pub(crate) fn norm_silu_forward(
     gamma: &[f32],
     beta: &[f32],
     d: NormDims,
+    residual: Option<Residual<'_>>,
 ) -> (Vec<f32>, NormStats) {
     let rows = d.batch * d.channels;
     assert_eq!(z.len(), rows * d.len, "norm_silu_forward: z");
+    if let Some(r) = residual {
+        assert_eq!(r.values.len(), z.len(), "norm_silu_forward: residual");
+        assert!(r.bias.is_none_or(|b| b.len() == d.channels));
+    }
     assert!(d.groups > 0 && d.channels.is_multiple_of(d.groups) && d.len > 0);
     let arch = Arch::new();
     // Pass 1: moments of z per row.
@@ -492,18 +508,42 @@ pub(crate) fn norm_silu_forward(
         row_sum: moments.iter().map(|m| m.0).collect(),
     };
     let maps = row_maps(bias, gamma, beta, &stats, d);
-    // Pass 2: y = silu(z scale + shift).
+    // Pass 2: y = silu(z scale + shift) (+ residual).
     let y = super::rows_by_blocks(rows, d.len, |row, from, yr| {
         let (s, h) = (maps.scale[row], maps.shift[row]);
-        let zr = &z[row * d.len + from..][..yr.len()];
-        vectorized!(arch, <'a> (
-            yr: &'a mut [f32] = yr, zr: &'a [f32] = zr, s: f32 = s, h: f32 = h,
-        ) -> () {
-            for (y, &z) in yr.iter_mut().zip(zr) {
-                let a = z * s + h;
-                *y = a * sigmoid(a);
-            }
-        });
+        let at = row * d.len + from;
+        let zr = &z[at..][..yr.len()];
+        match residual {
+            None => vectorized!(arch, <'a> (
+                yr: &'a mut [f32] = yr, zr: &'a [f32] = zr, s: f32 = s, h: f32 = h,
+            ) -> () {
+                for (y, &z) in yr.iter_mut().zip(zr) {
+                    let a = z * s + h;
+                    *y = a * sigmoid(a);
+                }
+            }),
+            Some(Residual { values, bias: None }) => vectorized!(arch, <'a> (
+                yr: &'a mut [f32] = yr, zr: &'a [f32] = zr, rr: &'a [f32] = &values[at..],
+                s: f32 = s, h: f32 = h,
+            ) -> () {
+                for ((y, &z), &r) in yr.iter_mut().zip(zr).zip(rr) {
+                    let a = z * s + h;
+                    *y = a * sigmoid(a) + r;
+                }
+            }),
+            Some(Residual {
+                values,
+                bias: Some(bias),
+            }) => vectorized!(arch, <'a> (
+                yr: &'a mut [f32] = yr, zr: &'a [f32] = zr, rr: &'a [f32] = &values[at..],
+                s: f32 = s, h: f32 = h, rb: f32 = bias[row % d.channels],
+            ) -> () {
+                for ((y, &z), &r) in yr.iter_mut().zip(zr).zip(rr) {
+                    let a = z * s + h;
+                    *y = a * sigmoid(a) + (r + rb);
+                }
+            }),
+        }
     });
     (y, stats)
 }
@@ -816,8 +856,23 @@ mod tests {
         };
         let f64s = |v: &[f32]| v.iter().map(|&x| f64::from(x)).collect::<Vec<_>>();
         let (zd, bd, gd, betad) = (f64s(&z), f64s(&bias), f64s(&gamma), f64s(&beta));
-        let (y, stats) = norm_silu_forward(&z, &bias, &gamma, &beta, d);
+        let (y, stats) = norm_silu_forward(&z, &bias, &gamma, &beta, d, None);
         let yr = reference(&zd, &bd, &gd, &betad);
+        // A residual is added in the same pass, exactly as a separate sum would add it.
+        let r = values(n, 9);
+        let rb = values(4, 10);
+        for rbias in [None, Some(rb.as_slice())] {
+            let residual = Residual {
+                values: &r,
+                bias: rbias,
+            };
+            let (with, with_stats) = norm_silu_forward(&z, &bias, &gamma, &beta, d, Some(residual));
+            assert_eq!(with_stats, stats);
+            let want: Vec<f32> = (0..n)
+                .map(|i| y[i] + (r[i] + rbias.map_or(0.0, |b| b[(i / d.len) % d.channels])))
+                .collect();
+            assert_eq!(with, want, "residual bias {}", rbias.is_some());
+        }
         assert_close(
             &y,
             &yr.iter().map(|&v| v as f32).collect::<Vec<_>>(),

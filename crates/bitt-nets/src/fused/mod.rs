@@ -15,8 +15,13 @@
 //! composes burn operations, which compute the same function. Tests compare both, values and
 //! gradients, and the kernels against naive loops and finite differences.
 //!
+//! [`res_block`] runs a whole ResNet block (two of these blocks, the residual or its 1x1
+//! projection and the sum) as one operation, so that burn's autodiff need not sum the
+//! input's two gradients on one thread; it is what BTR uses on flex.
+//!
 //! [`conv_bias`] is the same mechanism for BTR's convolutions without a normalisation (the
-//! residual path's 1x1 projections and the head).
+//! head, its last one through a sigmoid), and [`concat`](mod@concat) for the channel concatenations of
+//! BTR's decoder and the albedo U-Net.
 //!
 //! [`resample`] holds the albedo U-Net's upsampling and the interleaving of its outermost
 //! level's output phases, as single passes.
@@ -25,12 +30,14 @@
 //! encoders): `act(InstanceNorm(conv2d(x) + bias))` as one operation, tiled im2col + GEMM
 //! and row passes in [`kernels2d`].
 
+pub(crate) mod concat;
 pub(crate) mod conv2d;
 pub(crate) mod conv_bias;
 mod gemm;
 pub(crate) mod kernels;
 pub(crate) mod kernels2d;
 pub(crate) mod pool;
+pub(crate) mod res_block;
 pub(crate) mod resample;
 mod vectorized;
 
@@ -219,7 +226,7 @@ fn forward(
     let x = contiguous(x);
     let [weight, bias, gamma, beta] = [weight, bias, gamma, beta].map(|t| Arc::new(values(t)));
     let z = kernels::conv_forward(x.as_slice::<f32>().expect("contiguous f32"), &weight, conv);
-    let (y, stats) = kernels::norm_silu_forward(&z, &bias, &gamma, &beta, norm);
+    let (y, stats) = kernels::norm_silu_forward(&z, &bias, &gamma, &beta, norm, None);
     let y = flex_tensor(y, [conv.batch, conv.c_out, conv.len]);
     let saved = Saved {
         x,
