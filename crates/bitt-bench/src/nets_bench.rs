@@ -105,6 +105,8 @@ pub fn bench_net(
 ) -> Result<NetBench, BittError> {
     config.validate()?;
     let device = device.clone().autodiff();
+    // As the trainer does: rayon's idle worker spins instead of sleeping between passes.
+    let _awake = bitt_nets::awake::KeepAwake::on(&device);
     let (s, t) = (config.image_size, config.num_texels);
     let mut seconds = Vec::with_capacity(runs);
     let (params, input_shape) = match net {

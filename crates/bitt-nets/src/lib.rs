@@ -26,6 +26,7 @@
 //! on every backend. `fused/gemm.rs` holds the workspace's only `unsafe` library code.
 
 pub mod albedo;
+pub mod awake;
 pub mod btr;
 pub mod conv1d;
 mod conv_block;

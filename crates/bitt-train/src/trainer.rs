@@ -377,6 +377,8 @@ impl Trainer {
     ) -> Result<(), TrainError> {
         let start = Instant::now();
         let seconds = |t: &Trainer| t.seconds_before + start.elapsed().as_secs_f64();
+        // The steps are hundreds of short parallel passes: keep rayon's idle worker awake.
+        let _awake = bitt_nets::awake::KeepAwake::on(&self.device);
         if self.snapshots.is_empty() {
             let checkpoint = self.checkpoint(seconds(self))?;
             self.snapshots.push(Snapshot {
