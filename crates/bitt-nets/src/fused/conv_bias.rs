@@ -148,21 +148,18 @@ impl Backward<Flex, 3> for ConvBiasBackward {
         let s = ops.state;
         let d = s.d;
         let gy = contiguous(&grads.consume::<Flex>(&ops.node));
-        let mut gy_pre;
+        let gy_pre;
         let dy = match &s.sigmoid {
-            // Through the sigmoid: `dy = gy y (1 - y)`.
+            // Through the sigmoid: `dy = gy y (1 - y)`, one pass on rayon's threads.
             Some(y) => {
                 let (gy, y) = (gy.as_slice::<f32>(), y.as_slice::<f32>());
                 let (gy, y) = (gy.expect("contiguous f32"), y.expect("contiguous f32"));
-                gy_pre = gy.to_vec();
-                gy_pre
-                    .par_chunks_mut(1 << 14)
-                    .zip(y.par_chunks(1 << 14))
-                    .for_each(|(g, y)| {
-                        for (g, &y) in g.iter_mut().zip(y) {
-                            *g *= y * (1.0 - y);
-                        }
-                    });
+                gy_pre = super::rows_by_blocks(d.batch * d.c_out, d.len, |row, from, out| {
+                    let at = row * d.len + from;
+                    for ((o, &g), &y) in out.iter_mut().zip(&gy[at..]).zip(&y[at..]) {
+                        *o = g * (y * (1.0 - y));
+                    }
+                });
                 &gy_pre[..]
             }
             None => gy.as_slice::<f32>().expect("contiguous f32"),
