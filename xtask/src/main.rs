@@ -102,7 +102,7 @@ fn build_bitt() -> Result<PathBuf> {
     build_bitt_with(
         "release",
         &BUILD_BITT,
-        "the release `bitt` binary first (about 470 crates; 10 min from an empty target \
+        "the release `bitt` binary first (about 470 crates; 10-12 min from an empty target \
          folder on 2 cores, then seconds)",
     )
 }

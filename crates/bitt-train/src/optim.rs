@@ -171,10 +171,10 @@ const FLEX_CHUNK: usize = 1 << 14;
 /// (scalars rounded to `f32` first, as burn's scalar operations do), so both give identical
 /// bits; a test checks it. The operations composed from tensors allocate and walk the
 /// parameter a dozen times, on one thread: about a seventh of the main thread's time in a
-/// `quick` step. The parameter and its moments are updated where they lie when nothing
-/// else holds them (the trainer's case: the moments live only in [`AdamState`], and the
-/// graph that held the parameter is gone after the backward pass); a shared one is copied
-/// first.
+/// `quick` step. The moments are updated where they lie (they live only in [`AdamState`]);
+/// so is the parameter when nothing else holds it. A parameter its caller still holds
+/// (a module passed as a clone) keeps its values, and the new ones are written to a new
+/// buffer in the same pass, instead of being copied on one thread first.
 fn flex_update(
     p: Tensor<1>,
     g: &Tensor<1>,
@@ -215,8 +215,7 @@ fn flex_update(
     // The flex tensors are now the only holders of the values, unless someone else is.
     drop((p, m, v));
     let first = mf.is_none();
-    let (mut p_buf, mut m_buf, mut v_buf) = (
-        Values::of(pf),
+    let (mut m_buf, mut v_buf) = (
         mf.map_or_else(|| Values::Fresh(vec![0.0; n]), Values::of),
         vf.map_or_else(|| Values::Fresh(vec![0.0; n]), Values::of),
     );
@@ -228,35 +227,70 @@ fn flex_update(
     let sqrt_bias2 = c.bias2.sqrt() as f32;
     let epsilon = c.epsilon as f32;
     let step = (c.learning_rate / c.bias1) as f32;
-    p_buf
-        .values()
-        .par_chunks_mut(FLEX_CHUNK)
-        .zip(m_buf.values().par_chunks_mut(FLEX_CHUNK))
-        .zip(v_buf.values().par_chunks_mut(FLEX_CHUNK))
-        .zip(gs.par_chunks(FLEX_CHUNK))
-        .for_each(|(((ps, ms), vs), gs)| {
-            for (((p, m), v), &g) in ps.iter_mut().zip(ms).zip(vs).zip(gs) {
-                let new_m = if first {
-                    g * one_minus_beta1
-                } else {
-                    *m * beta1 + g * one_minus_beta1
-                };
-                let new_v = if first {
-                    (g * g) * one_minus_beta2
-                } else {
-                    *v * beta2 + (g * g) * one_minus_beta2
-                };
-                let denom = new_v.sqrt() / sqrt_bias2 + epsilon;
-                *p -= (new_m / denom) * step;
-                *m = new_m;
-                *v = new_v;
-            }
-        });
-    Ok((p_buf.tensor(n), m_buf.tensor(n), v_buf.tensor(n)))
+    // One element: updates its moments and gives the new parameter.
+    let update = |p: f32, m: &mut f32, v: &mut f32, g: f32| -> f32 {
+        let new_m = if first {
+            g * one_minus_beta1
+        } else {
+            *m * beta1 + g * one_minus_beta1
+        };
+        let new_v = if first {
+            (g * g) * one_minus_beta2
+        } else {
+            *v * beta2 + (g * g) * one_minus_beta2
+        };
+        let denom = new_v.sqrt() / sqrt_bias2 + epsilon;
+        *m = new_m;
+        *v = new_v;
+        p - (new_m / denom) * step
+    };
+    let (ms, vs) = (m_buf.values(), v_buf.values());
+    let mut pf = pf;
+    let p = if writable_in_place(&mut pf) {
+        // Unshared (the graph that held it is gone and the caller gave it up): updated
+        // where it lies.
+        let ps = pf
+            .try_storage_mut::<f32>()
+            .expect("a tensor found unshared stays unshared");
+        ps.par_chunks_mut(FLEX_CHUNK)
+            .zip(ms.par_chunks_mut(FLEX_CHUNK))
+            .zip(vs.par_chunks_mut(FLEX_CHUNK))
+            .zip(gs.par_chunks(FLEX_CHUNK))
+            .for_each(|(((ps, ms), vs), gs)| {
+                for (((p, m), v), &g) in ps.iter_mut().zip(ms).zip(vs).zip(gs) {
+                    *p = update(*p, m, v, g);
+                }
+            });
+        Values::Owned(pf)
+    } else {
+        // Shared (a module its caller still holds): the new values are collected into a
+        // new buffer on rayon's threads as they are computed (rayon's indexed collect writes
+        // each value once, at its place), instead of a copy made first on one thread.
+        let source = pf.as_slice::<f32>().unwrap_or_default();
+        let mut out = Vec::new();
+        source
+            .par_iter()
+            .zip(ms.par_iter_mut())
+            .zip(vs.par_iter_mut())
+            .zip(gs.par_iter())
+            .with_min_len(FLEX_CHUNK)
+            .map(|(((&p, m), v), &g)| update(p, m, v, g))
+            .collect_into_vec(&mut out);
+        Values::Fresh(out)
+    };
+    Ok((p.tensor(n), m_buf.tensor(n), v_buf.tensor(n)))
 }
 
 /// The parameter and moments [`flex_update`] gives back when it cannot take them.
 type GivenBack = Box<(Tensor<1>, Option<Tensor<1>>, Option<Tensor<1>>)>;
+
+/// Whether `t`'s storage is exactly its `f32` values and nothing else holds it.
+fn writable_in_place(t: &mut burn::backend::flex::FlexTensor) -> bool {
+    let whole = t
+        .as_slice::<f32>()
+        .is_some_and(|s| s.len() == t.storage::<f32>().len());
+    whole && t.try_storage_mut::<f32>().is_some()
+}
 
 /// The values [`flex_update`] writes: a flex tensor's own storage when nothing else holds
 /// it, else a new buffer.
@@ -264,17 +298,14 @@ enum Values {
     /// A contiguous `f32` flex tensor that nothing else holds (its storage is exactly its
     /// values).
     Owned(burn::backend::flex::FlexTensor),
-    /// A copy, or zeros for a moment's first step.
+    /// A copy, new values, or zeros for a moment's first step.
     Fresh(Vec<f32>),
 }
 
 impl Values {
     /// `t`'s storage when it can be written in place, else a copy of its values.
     fn of(mut t: burn::backend::flex::FlexTensor) -> Self {
-        let whole = t
-            .as_slice::<f32>()
-            .is_some_and(|s| s.len() == t.storage::<f32>().len());
-        if whole && t.try_storage_mut::<f32>().is_some() {
+        if writable_in_place(&mut t) {
             Values::Owned(t)
         } else {
             Values::Fresh(t.as_slice::<f32>().unwrap_or_default().to_vec())
