@@ -32,7 +32,6 @@ use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::{InstanceNorm, InstanceNormConfig, PaddingConfig2d};
 use burn::tensor::activation::relu;
-use burn::tensor::ops::PadMode;
 use burn::tensor::{Device, Tensor};
 
 use crate::NetsError;
@@ -200,7 +199,7 @@ fn outermost_up(conv: &Conv2d, x: Tensor<4>) -> Tensor<4> {
         .as_ref()
         .map(|bias| Tensor::cat(vec![bias.val(); 4], 0));
     let out = conv_act(
-        x.pad((1, 1, 1, 1), PadMode::Edge),
+        crate::fused::resample::pad_edge1(x),
         Tensor::cat(phases, 0),
         bias,
         Activation::Sigmoid,
@@ -285,6 +284,7 @@ impl AlbedoNet {
 #[cfg(test)]
 mod tests {
     use burn::tensor::activation::{leaky_relu, sigmoid};
+    use burn::tensor::ops::PadMode;
 
     use super::*;
     use crate::fused::conv2d::without_fusion;

@@ -11,7 +11,15 @@
 //!   slices, four copies and three concatenations; its backward pass zeroes a buffer the
 //!   size of the phases' input for each of the four slices and adds the four.
 //!
-//! Both compute exactly what the compositions compute, values and gradients bit for bit
+//! - [`pad_edge1`]: the outermost U-Net level's edge padding by one pixel on each side
+//!   (`albedo::outermost_up`). burn composes it from zero-filled buffers, slices, repeats and
+//!   slice assignments, each way on one thread.
+//!
+//! - [`batch_half_on_flex`]: one half of the batch (BTR's left or right hand). burn's
+//!   `narrow` backward fills a buffer the size of both hands with zeros and writes the
+//!   half's gradient into it, on one thread.
+//!
+//! All compute exactly what the compositions compute, values and gradients bit for bit
 //! (the upsampling gradient adds the four pixels in the order burn's two `sum_dim`s do).
 //! On every backend but flex (`f32`) they return `None` and the caller composes burn
 //! operations; tests compare both.
@@ -158,6 +166,147 @@ impl Backward<Flex, 1> for UpsampleTexelsBackward {
                 let pairs = &g[2 * (r * l + from)..];
                 for (k, d) in out.iter_mut().enumerate() {
                     *d = pairs[2 * k] + pairs[2 * k + 1];
+                }
+            });
+            grads.register::<Flex>(node.id, flex_tensor(dx, shape));
+        }
+    }
+}
+
+/// Edge padding by one pixel on each side of the last two axes (burn's `PadMode::Edge`):
+/// one pass each way on flex, else burn's composition.
+///
+/// # Shapes
+/// - `x`: `[N, C, H, W]`
+/// - output: `[N, C, H + 2, W + 2]`
+pub(crate) fn pad_edge1(x: Tensor<4>) -> Tensor<4> {
+    pad_edge1_on_flex(&x).unwrap_or_else(|| pad_edge1_composed(x))
+}
+
+/// [`pad_edge1`] as burn operations.
+fn pad_edge1_composed(x: Tensor<4>) -> Tensor<4> {
+    x.pad((1, 1, 1, 1), burn::tensor::ops::PadMode::Edge)
+}
+
+/// [`pad_edge1`] on flex; `None` (nothing computed) elsewhere, and for planes narrower or
+/// lower than 2 pixels (whose three copies of one pixel burn adds in another order).
+///
+/// # Shapes
+/// - `x`: `[N, C, H, W]`
+/// - output: `[N, C, H + 2, W + 2]`
+fn pad_edge1_on_flex(x: &Tensor<4>) -> Option<Tensor<4>> {
+    let shape = x.dims();
+    let [n, c, h, w] = shape;
+    if h < 2 || w < 2 {
+        return None;
+    }
+    run(x, PadEdgeBackward, shape, |x| {
+        let y = super::rows_by_blocks(n * c * (h + 2), w + 2, |r, from, out| {
+            // Output row `r` of plane `r / (h + 2)` repeats input row `clamp(r - 1)`.
+            let (plane, i) = (r / (h + 2), r % (h + 2));
+            let row = &x[(plane * h + i.saturating_sub(1).min(h - 1)) * w..][..w];
+            for (k, v) in out.iter_mut().enumerate() {
+                *v = row[(from + k).saturating_sub(1).min(w - 1)];
+            }
+        });
+        flex_tensor(y, [n, c, h + 2, w + 2])
+    })
+}
+
+/// The gradient of [`pad_edge1`] (`H, W >= 2`): `[N, C, H + 2, W + 2]` -> `[N, C, H, W]`.
+/// A border pixel's copies are added as burn's composition adds them: the columns first (the
+/// composition pads the rows first, so its backward undoes the columns first), then the rows.
+fn pad_edge1_gradient(g: &[f32], [n, c, h, w]: [usize; 4]) -> Vec<f32> {
+    let w2 = w + 2;
+    // Row `r` of the padded gradient with its columns folded back: `[w]` values.
+    let folded = |r: usize, j: usize| -> f32 {
+        let row = &g[r * w2..][..w2];
+        if j == 0 {
+            row[1] + row[0]
+        } else if j == w - 1 {
+            row[w] + row[w + 1]
+        } else {
+            row[j + 1]
+        }
+    };
+    super::rows_by_blocks(n * c * h, w, |r, from, out| {
+        let (plane, i) = (r / h, r % h);
+        let base = plane * (h + 2);
+        for (k, d) in out.iter_mut().enumerate() {
+            let j = from + k;
+            let centre = folded(base + i + 1, j);
+            *d = if i == 0 {
+                centre + folded(base, j)
+            } else if i == h - 1 {
+                centre + folded(base + h + 1, j)
+            } else {
+                centre
+            };
+        }
+    })
+}
+
+#[derive(Debug)]
+struct PadEdgeBackward;
+
+impl Backward<Flex, 1> for PadEdgeBackward {
+    type State = [usize; 4];
+
+    fn backward(self, ops: Ops<Self::State, 1>, grads: &mut Gradients, _: &mut Checkpointer) {
+        let [node_x] = ops.parents;
+        let shape = ops.state;
+        let gy = contiguous(&grads.consume::<Flex>(&ops.node));
+        if let Some(node) = node_x {
+            let g = gy.as_slice::<f32>().expect("contiguous f32");
+            grads.register::<Flex>(node.id, flex_tensor(pad_edge1_gradient(g, shape), shape));
+        }
+    }
+}
+
+/// Half `half` (0: the first, 1: the second) of an even batch, as `x.narrow(0, half * N / 2,
+/// N / 2)` computes it, in one pass each way on flex; `None` (nothing computed) elsewhere or
+/// for an odd batch.
+///
+/// # Shapes
+/// - `x`: `[N, C, L]`
+/// - output: `[N / 2, C, L]`
+pub(crate) fn batch_half_on_flex(x: &Tensor<3>, half: usize) -> Option<Tensor<3>> {
+    let shape = x.dims();
+    let [n, c, l] = shape;
+    if !n.is_multiple_of(2) || half > 1 || n * c * l == 0 {
+        return None;
+    }
+    let rows = n / 2 * c;
+    run(x, BatchHalfBackward, (shape, half), |x| {
+        let start = half * rows * l;
+        let y = super::rows_by_blocks(rows, l, |r, from, out| {
+            out.copy_from_slice(&x[start + r * l + from..][..out.len()]);
+        });
+        flex_tensor(y, [n / 2, c, l])
+    })
+}
+
+#[derive(Debug)]
+struct BatchHalfBackward;
+
+impl Backward<Flex, 1> for BatchHalfBackward {
+    /// The input's shape and the half taken.
+    type State = ([usize; 3], usize);
+
+    fn backward(self, ops: Ops<Self::State, 1>, grads: &mut Gradients, _: &mut Checkpointer) {
+        let [node_x] = ops.parents;
+        let (shape, half) = ops.state;
+        let [n, c, l] = shape;
+        let gy = contiguous(&grads.consume::<Flex>(&ops.node));
+        if let Some(node) = node_x {
+            let g = gy.as_slice::<f32>().expect("contiguous f32");
+            let rows = n / 2 * c;
+            // The half's gradient at its place, zeros in the other half.
+            let dx = super::rows_by_blocks(n * c, l, |r, from, out| {
+                if r / rows == half {
+                    out.copy_from_slice(&g[(r - half * rows) * l + from..][..out.len()]);
+                } else {
+                    out.fill(0.0);
                 }
             });
             grads.register::<Flex>(node.id, flex_tensor(dx, shape));
@@ -387,6 +536,54 @@ mod tests {
                 "texels {shape:?}"
             );
         }
+        for shape in [[2, 3, 4, 5], [1, 2, 2, 2], [3, 1, 2, 7], [1, 1, 6, 2]] {
+            let x = input(shape, &device).require_grad();
+            let ours = pad_edge1_on_flex(&x).expect("runs on flex");
+            let theirs = pad_edge1_composed(x.clone());
+            assert_eq!(
+                values(ours.clone()),
+                values(theirs.clone()),
+                "pad {shape:?}"
+            );
+            let w = input(ours.dims(), &device).detach() * 3.0 + 0.5;
+            let a = x.grad(&(ours * w.clone()).sum().backward()).unwrap();
+            let b = x.grad(&(theirs * w).sum().backward()).unwrap();
+            assert_eq!(values(a), values(b), "pad gradient {shape:?}");
+        }
+        for shape in [[1, 1, 1, 1], [1, 2, 1, 3], [2, 1, 3, 1]] {
+            assert!(
+                pad_edge1_on_flex(&input(shape, &device)).is_none(),
+                "{shape:?}"
+            );
+        }
+        for shape in [[2, 3, 5], [4, 1, 7], [2, 8, 300]] {
+            let x = input([shape[0], shape[1], 1, shape[2]], &device)
+                .reshape(shape)
+                .require_grad();
+            let b = shape[0] / 2;
+            let ours = [0, 1].map(|half| batch_half_on_flex(&x, half).expect("runs on flex"));
+            let theirs = [0, 1].map(|half| x.clone().narrow(0, half * b, b));
+            let weight = |i: usize| ours[i].clone().detach() * (3.0 + i as f32) + 0.5;
+            let loss = |t: &[Tensor<3>; 2]| {
+                (t[0].clone() * weight(0)).sum() + (t[1].clone() * weight(1)).sum()
+            };
+            for i in 0..2 {
+                assert_eq!(
+                    values(ours[i].clone().unsqueeze()),
+                    values(theirs[i].clone().unsqueeze()),
+                    "half {i} of {shape:?}"
+                );
+            }
+            let a = x.grad(&loss(&ours).backward()).unwrap();
+            let t = x.grad(&loss(&theirs).backward()).unwrap();
+            assert_eq!(
+                values(a.unsqueeze()),
+                values(t.unsqueeze()),
+                "halves {shape:?}"
+            );
+        }
+        let odd = input([3, 1, 1, 2], &device).reshape([3, 1, 2]);
+        assert!(batch_half_on_flex(&odd, 0).is_none(), "an odd batch");
         let plain = input([2, 8, 4, 3], &Device::flex());
         assert_eq!(
             values(upsample2_on_flex(&plain).unwrap()),
@@ -397,6 +594,10 @@ mod tests {
             values(interleave_composed(plain.clone(), 2))
         );
         assert!(interleave_on_flex(&plain, 3).is_none(), "8 is not 4 x 3");
+        assert_eq!(
+            values(pad_edge1_on_flex(&plain).unwrap()),
+            values(pad_edge1_composed(plain.clone()))
+        );
         for (name, other) in bitt_testkit::devices()
             .into_iter()
             .filter(|(n, _)| *n != "flex")
@@ -404,8 +605,10 @@ mod tests {
             for device in [other.clone(), other.autodiff()] {
                 let x = input([1, 4, 2, 2], &device);
                 assert!(upsample2_on_flex(&x).is_none(), "{name}");
+                assert!(pad_edge1_on_flex(&x).is_none(), "{name}");
                 let t = x.clone().reshape([1, 4, 4]);
                 assert!(upsample2_texels_on_flex(&t).is_none(), "{name}");
+                assert!(batch_half_on_flex(&t, 0).is_none(), "{name}");
                 assert!(interleave_on_flex(&x, 1).is_none(), "{name}");
             }
         }
