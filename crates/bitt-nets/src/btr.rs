@@ -399,13 +399,10 @@ impl Btr {
             h = level.block2.forward(h);
         }
         let out = self.head2.forward_sigmoid(self.head1.forward(h));
-        let [left, right] = [0, 1].map(|half| {
-            self.fused_texel_ops
-                .then(|| fused::resample::batch_half_on_flex(&out, half))
-                .flatten()
-                .unwrap_or_else(|| out.clone().narrow(0, half * b, b))
-        });
-        BtrOutput { left, right }
+        BtrOutput {
+            left: out.clone().narrow(0, 0, b),
+            right: out.narrow(0, b, b),
+        }
     }
 }
 

@@ -15,10 +15,6 @@
 //!   (`albedo::outermost_up`). burn composes it from zero-filled buffers, slices, repeats and
 //!   slice assignments, each way on one thread.
 //!
-//! - [`batch_half_on_flex`]: one half of the batch (BTR's left or right hand). burn's
-//!   `narrow` backward fills a buffer the size of both hands with zeros and writes the
-//!   half's gradient into it, on one thread.
-//!
 //! All compute exactly what the compositions compute, values and gradients bit for bit
 //! (the upsampling gradient adds the four pixels in the order burn's two `sum_dim`s do).
 //! On every backend but flex (`f32`) they return `None` and the caller composes burn
@@ -259,57 +255,6 @@ impl Backward<Flex, 1> for PadEdgeBackward {
         if let Some(node) = node_x {
             let g = gy.as_slice::<f32>().expect("contiguous f32");
             grads.register::<Flex>(node.id, flex_tensor(pad_edge1_gradient(g, shape), shape));
-        }
-    }
-}
-
-/// Half `half` (0: the first, 1: the second) of an even batch, as `x.narrow(0, half * N / 2,
-/// N / 2)` computes it, in one pass each way on flex; `None` (nothing computed) elsewhere or
-/// for an odd batch.
-///
-/// # Shapes
-/// - `x`: `[N, C, L]`
-/// - output: `[N / 2, C, L]`
-pub(crate) fn batch_half_on_flex(x: &Tensor<3>, half: usize) -> Option<Tensor<3>> {
-    let shape = x.dims();
-    let [n, c, l] = shape;
-    if !n.is_multiple_of(2) || half > 1 || n * c * l == 0 {
-        return None;
-    }
-    let rows = n / 2 * c;
-    run(x, BatchHalfBackward, (shape, half), |x| {
-        let start = half * rows * l;
-        let y = super::rows_by_blocks(rows, l, |r, from, out| {
-            out.copy_from_slice(&x[start + r * l + from..][..out.len()]);
-        });
-        flex_tensor(y, [n / 2, c, l])
-    })
-}
-
-#[derive(Debug)]
-struct BatchHalfBackward;
-
-impl Backward<Flex, 1> for BatchHalfBackward {
-    /// The input's shape and the half taken.
-    type State = ([usize; 3], usize);
-
-    fn backward(self, ops: Ops<Self::State, 1>, grads: &mut Gradients, _: &mut Checkpointer) {
-        let [node_x] = ops.parents;
-        let (shape, half) = ops.state;
-        let [n, c, l] = shape;
-        let gy = contiguous(&grads.consume::<Flex>(&ops.node));
-        if let Some(node) = node_x {
-            let g = gy.as_slice::<f32>().expect("contiguous f32");
-            let rows = n / 2 * c;
-            // The half's gradient at its place, zeros in the other half.
-            let dx = super::rows_by_blocks(n * c, l, |r, from, out| {
-                if r / rows == half {
-                    out.copy_from_slice(&g[(r - half * rows) * l + from..][..out.len()]);
-                } else {
-                    out.fill(0.0);
-                }
-            });
-            grads.register::<Flex>(node.id, flex_tensor(dx, shape));
         }
     }
 }
@@ -556,34 +501,6 @@ mod tests {
                 "{shape:?}"
             );
         }
-        for shape in [[2, 3, 5], [4, 1, 7], [2, 8, 300]] {
-            let x = input([shape[0], shape[1], 1, shape[2]], &device)
-                .reshape(shape)
-                .require_grad();
-            let b = shape[0] / 2;
-            let ours = [0, 1].map(|half| batch_half_on_flex(&x, half).expect("runs on flex"));
-            let theirs = [0, 1].map(|half| x.clone().narrow(0, half * b, b));
-            let weight = |i: usize| ours[i].clone().detach() * (3.0 + i as f32) + 0.5;
-            let loss = |t: &[Tensor<3>; 2]| {
-                (t[0].clone() * weight(0)).sum() + (t[1].clone() * weight(1)).sum()
-            };
-            for i in 0..2 {
-                assert_eq!(
-                    values(ours[i].clone().unsqueeze()),
-                    values(theirs[i].clone().unsqueeze()),
-                    "half {i} of {shape:?}"
-                );
-            }
-            let a = x.grad(&loss(&ours).backward()).unwrap();
-            let t = x.grad(&loss(&theirs).backward()).unwrap();
-            assert_eq!(
-                values(a.unsqueeze()),
-                values(t.unsqueeze()),
-                "halves {shape:?}"
-            );
-        }
-        let odd = input([3, 1, 1, 2], &device).reshape([3, 1, 2]);
-        assert!(batch_half_on_flex(&odd, 0).is_none(), "an odd batch");
         let plain = input([2, 8, 4, 3], &Device::flex());
         assert_eq!(
             values(upsample2_on_flex(&plain).unwrap()),
@@ -608,7 +525,6 @@ mod tests {
                 assert!(pad_edge1_on_flex(&x).is_none(), "{name}");
                 let t = x.clone().reshape([1, 4, 4]);
                 assert!(upsample2_texels_on_flex(&t).is_none(), "{name}");
-                assert!(batch_half_on_flex(&t, 0).is_none(), "{name}");
                 assert!(interleave_on_flex(&x, 1).is_none(), "{name}");
             }
         }
