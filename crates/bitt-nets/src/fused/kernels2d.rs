@@ -17,6 +17,7 @@ use pulp::Arch;
 use rayon::prelude::*;
 
 use super::gemm::{MatMut, MatRef, matmul, products_into_new};
+use super::scratch::Scratch;
 use super::vectorized::vectorized;
 
 /// Sizes of a 2-D convolution with symmetric zero padding and no dilation or groups.
@@ -89,13 +90,14 @@ impl Conv2dDims {
             .max(1)
     }
 
-    /// A patch-matrix buffer for one tile (empty for a 1x1 convolution, which needs none).
-    fn col_buffer(&self) -> Vec<f32> {
-        if self.pointwise() {
-            Vec::new()
+    /// A patch-matrix buffer for one tile (empty for a 1x1 convolution, which needs none);
+    /// its values are left from earlier use, and every user writes the part it reads.
+    fn col_buffer(&self) -> Scratch {
+        Scratch::new(if self.pointwise() {
+            0
         } else {
-            vec![0.0; self.patch() * self.tile()]
-        }
+            self.patch() * self.tile()
+        })
     }
 
     /// The weight `[C_out, C_in kh kw]`.
@@ -157,9 +159,9 @@ fn walk_row(
     let [h, w] = d.size;
     let (i, j) = tap;
     let mut t = 0;
+    // The output pixel `p0 + t` as (row, column), advanced by segments (no division each).
+    let (mut oy, mut ox0) = (p0 / ow, p0 % ow);
     while t < n {
-        let p = p0 + t;
-        let (oy, ox0) = (p / ow, p % ow);
         let seg = (ow - ox0).min(n - t);
         let iy = (oy * d.stride[0] + i) as isize - d.padding[0] as isize;
         if iy < 0 || iy >= h as isize {
@@ -183,6 +185,53 @@ fn walk_row(
             }
         }
         t += seg;
+        ox0 += seg;
+        if ox0 == ow {
+            (oy, ox0) = (oy + 1, 0);
+        }
+    }
+}
+
+/// `row[u] = src[2 u]`: a stride-2 convolution's taps. In blocks of 16 that LLVM turns into
+/// wide loads and shuffles (an element at a time, these gathers were 3 % of the `quick`
+/// training step).
+#[inline(always)]
+fn every_second(row: &mut [f32], src: &[f32]) {
+    let full = (src.len() / 32).min(row.len() / 16);
+    for (o, s) in row[..16 * full]
+        .chunks_exact_mut(16)
+        .zip(src.chunks_exact(32))
+    {
+        for i in 0..16 {
+            o[i] = s[2 * i];
+        }
+    }
+    for (v, &s) in row[16 * full..]
+        .iter_mut()
+        .zip(src[32 * full..].iter().step_by(2))
+    {
+        *v = s;
+    }
+}
+
+/// `dst[2 u] += row[u]`, the adjoint of [`every_second`], in the same blocks.
+#[inline(always)]
+fn add_every_second(dst: &mut [f32], row: &[f32]) {
+    let full = (dst.len() / 32).min(row.len() / 16);
+    for (o, s) in dst[..32 * full]
+        .chunks_exact_mut(32)
+        .zip(row.chunks_exact(16))
+    {
+        for i in 0..16 {
+            o[2 * i] += s[i];
+        }
+    }
+    for (x, &v) in dst[32 * full..]
+        .iter_mut()
+        .step_by(2)
+        .zip(&row[16 * full..])
+    {
+        *x += v;
     }
 }
 
@@ -192,6 +241,7 @@ fn walk_row(
 /// # Shapes
 /// - `x`: `[C_in, H, W]`; `col`: at least `[C_in kh kw, n]`
 fn im2col(x: &[f32], d: &Conv2dDims, p0: usize, n: usize, col: &mut [f32]) {
+    let arch = Arch::new();
     let [kh, kw] = d.kernel;
     let plane = d.plane();
     col[..d.patch() * n]
@@ -208,8 +258,17 @@ fn im2col(x: &[f32], d: &Conv2dDims, p0: usize, n: usize, col: &mut [f32]) {
                     row[ts].copy_from_slice(&src[s0..s0 + len]);
                 }
                 Some(s0) => {
-                    for (u, v) in row[ts].iter_mut().enumerate() {
-                        *v = src[s0 + u * step];
+                    // One bounds check for the segment, then a plain strided walk.
+                    let row = &mut row[ts];
+                    let src = &src[s0..=s0 + (row.len() - 1) * step];
+                    if step == 2 {
+                        vectorized!(arch, <'a> (row: &'a mut [f32] = row, src: &'a [f32] = src) -> () {
+                            every_second(row, src)
+                        });
+                    } else {
+                        for (v, &s) in row.iter_mut().zip(src.iter().step_by(step)) {
+                            *v = s;
+                        }
                     }
                 }
             });
@@ -222,6 +281,7 @@ fn im2col(x: &[f32], d: &Conv2dDims, p0: usize, n: usize, col: &mut [f32]) {
 /// # Shapes
 /// - `dx`: `[C_in, H, W]`; `dcol`: at least `[C_in kh kw, n]`
 fn col2im_add(dcol: &[f32], d: &Conv2dDims, p0: usize, n: usize, dx: &mut [f32]) {
+    let arch = Arch::new();
     let [kh, kw] = d.kernel;
     let taps = kh * kw;
     dx.par_chunks_mut(d.plane())
@@ -231,8 +291,16 @@ fn col2im_add(dcol: &[f32], d: &Conv2dDims, p0: usize, n: usize, dx: &mut [f32])
                 let row = &dcol[(c * taps + r) * n..(c * taps + r + 1) * n];
                 walk_row(d, (r / kw, r % kw), p0, n, |ts, from, step| {
                     if let Some(s0) = from {
-                        for (u, v) in row[ts].iter().enumerate() {
-                            plane[s0 + u * step] += v;
+                        let row = &row[ts];
+                        let dst = &mut plane[s0..=s0 + (row.len() - 1) * step];
+                        if step == 2 {
+                            vectorized!(arch, <'a> (dst: &'a mut [f32] = dst, row: &'a [f32] = row) -> () {
+                                add_every_second(dst, row)
+                            });
+                        } else {
+                            for (x, &v) in dst.iter_mut().step_by(step).zip(row) {
+                                *x += v;
+                            }
                         }
                     }
                 });

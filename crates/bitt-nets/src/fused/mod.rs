@@ -39,6 +39,7 @@ pub(crate) mod kernels2d;
 pub(crate) mod pool;
 pub(crate) mod res_block;
 pub(crate) mod resample;
+mod scratch;
 mod vectorized;
 
 use std::sync::Arc;

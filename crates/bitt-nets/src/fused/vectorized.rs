@@ -19,9 +19,16 @@
 /// ```
 ///
 /// The body sees only the named arguments (each `name: type = value`, types may use the
-/// lifetime `'a`) and items in scope, not the caller's locals.
+/// lifetime `'a`) and items in scope, not the caller's locals. Written `<'a> |simd| (...)`,
+/// it also sees the instruction set as `simd` (a `pulp::Simd`), for kernels written with
+/// pulp's vector types.
 macro_rules! vectorized {
-    ($arch:expr, <$l:lifetime> ($($arg:ident : $ty:ty = $val:expr),* $(,)?) -> $out:ty $body:block) => {{
+    ($arch:expr, <$l:lifetime> ($($arg:ident : $ty:ty = $val:expr),* $(,)?) -> $out:ty $body:block) => {
+        $crate::fused::vectorized::vectorized!(
+            $arch, <$l> |_simd| ($($arg : $ty = $val),*) -> $out $body
+        )
+    };
+    ($arch:expr, <$l:lifetime> |$simd:ident| ($($arg:ident : $ty:ty = $val:expr),* $(,)?) -> $out:ty $body:block) => {{
         struct Kernel<$l> {
             $($arg: $ty,)*
             _borrows: ::std::marker::PhantomData<&$l ()>,
@@ -29,7 +36,7 @@ macro_rules! vectorized {
         impl<$l> ::pulp::WithSimd for Kernel<$l> {
             type Output = $out;
             #[inline(always)]
-            fn with_simd<S: ::pulp::Simd>(self, _simd: S) -> $out {
+            fn with_simd<S: ::pulp::Simd>(self, $simd: S) -> $out {
                 let Kernel { $($arg,)* .. } = self;
                 $body
             }
