@@ -11,6 +11,9 @@
 //! uninitialised capacity through [`Columns`], which records the columns each product
 //! overwrote, lets a product accumulate only onto columns already written, and checks that
 //! every column of every sample was written before the buffer's length is set.
+//!
+//! [`pair_by_blocks`] builds two new buffers from one row pass the same way: the pass writes
+//! blocks on the stack, and this module copies every block into the buffers' capacity.
 #![allow(unsafe_code)]
 
 use std::mem::MaybeUninit;
@@ -316,9 +319,76 @@ pub(crate) fn products_into_new<S>(
     out
 }
 
+/// Floats per block of [`pair_by_blocks`] (as [`super::rows_by_blocks`]'s).
+const PAIR_BLOCK: usize = 256;
+
+/// Two new `[rows, len]` buffers computed block by block on rayon's threads, never cleared:
+/// `f(row, from, a, b)` writes the row's values at `[from, from + a.len())` of each (`a`,
+/// `b` of equal length). The blocks are written on the stack and copied into place, every
+/// element of both, so a pass that produces two outputs reads its inputs once.
+pub(crate) fn pair_by_blocks(
+    rows: usize,
+    len: usize,
+    f: impl Fn(usize, usize, &mut [f32], &mut [f32]) + Sync,
+) -> (Vec<f32>, Vec<f32>) {
+    let total = rows * len;
+    let (mut a, mut b): (Vec<f32>, Vec<f32>) =
+        (Vec::with_capacity(total), Vec::with_capacity(total));
+    if total > 0 {
+        a.spare_capacity_mut()[..total]
+            .par_chunks_mut(PAIR_BLOCK)
+            .zip(b.spare_capacity_mut()[..total].par_chunks_mut(PAIR_BLOCK))
+            .enumerate()
+            .with_min_len(16)
+            .for_each(|(i, (da, db))| {
+                let (mut la, mut lb) = ([0.0f32; PAIR_BLOCK], [0.0f32; PAIR_BLOCK]);
+                let (start, n) = (i * PAIR_BLOCK, da.len());
+                // A block may span the end of one row and the start of the next.
+                let mut p = start;
+                while p < start + n {
+                    let (row, from) = (p / len, p % len);
+                    let m = (len - from).min(start + n - p);
+                    let at = p - start;
+                    f(row, from, &mut la[at..at + m], &mut lb[at..at + m]);
+                    p += m;
+                }
+                for (d, &v) in da.iter_mut().zip(&la[..n]) {
+                    d.write(v);
+                }
+                for (d, &v) in db.iter_mut().zip(&lb[..n]) {
+                    d.write(v);
+                }
+            });
+    }
+    // SAFETY: `total <= capacity` for both, and every chunk of both `[..total]` was written
+    // element by element above (`da`, `db` have `n` elements each; the loops write all `n`).
+    unsafe {
+        a.set_len(total);
+        b.set_len(total);
+    }
+    (a, b)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn pair_by_blocks_writes_both_buffers_row_by_row() {
+        for (rows, len) in [(3, 100), (2, 600), (5, 1), (0, 7)] {
+            let (a, b) = pair_by_blocks(rows, len, |row, from, a, b| {
+                for (u, (x, y)) in a.iter_mut().zip(b.iter_mut()).enumerate() {
+                    *x = (row * 1000 + from + u) as f32;
+                    *y = -*x;
+                }
+            });
+            let want: Vec<f32> = (0..rows)
+                .flat_map(|r| (0..len).map(move |t| (r * 1000 + t) as f32))
+                .collect();
+            assert_eq!(a, want);
+            assert_eq!(b, want.iter().map(|v| -v).collect::<Vec<_>>());
+        }
+    }
 
     #[test]
     fn strided_products_and_accumulation() {

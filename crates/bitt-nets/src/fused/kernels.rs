@@ -493,6 +493,36 @@ pub(crate) fn norm_silu_forward(
     d: NormDims,
     residual: Option<Residual<'_>>,
 ) -> (Vec<f32>, NormStats) {
+    let (y, stats, _) = norm_silu_forward_with(z, bias, gamma, beta, d, residual, false);
+    (y, stats)
+}
+
+/// [`norm_silu_forward`] that also returns the SiLU's sigmoid `sigmoid(z scale + shift)`
+/// of every element, written in the same pass, for [`norm_silu_backward_in_place`] to read
+/// instead of computing it again (its exponential and division were most of that pass).
+pub(crate) fn norm_silu_forward_keeping_sigmoid(
+    z: &[f32],
+    bias: &[f32],
+    gamma: &[f32],
+    beta: &[f32],
+    d: NormDims,
+    residual: Option<Residual<'_>>,
+) -> (Vec<f32>, NormStats, Vec<f32>) {
+    let (y, stats, sigmoid) = norm_silu_forward_with(z, bias, gamma, beta, d, residual, true);
+    (y, stats, sigmoid.expect("kept"))
+}
+
+/// [`norm_silu_forward`], with the sigmoids when `keep_sigmoid`.
+#[allow(clippy::too_many_arguments)]
+fn norm_silu_forward_with(
+    z: &[f32],
+    bias: &[f32],
+    gamma: &[f32],
+    beta: &[f32],
+    d: NormDims,
+    residual: Option<Residual<'_>>,
+    keep_sigmoid: bool,
+) -> (Vec<f32>, NormStats, Option<Vec<f32>>) {
     let rows = d.batch * d.channels;
     assert_eq!(z.len(), rows * d.len, "norm_silu_forward: z");
     if let Some(r) = residual {
@@ -538,6 +568,22 @@ pub(crate) fn norm_silu_forward(
         row_sum: moments.iter().map(|m| m.0).collect(),
     };
     let maps = row_maps(bias, gamma, beta, &stats, d);
+    if keep_sigmoid {
+        // Pass 2 with the sigmoids: the same operations, both values written.
+        let (y, sigmoid) = super::gemm::pair_by_blocks(rows, d.len, |row, from, yr, gr| {
+            let (s, h) = (maps.scale[row], maps.shift[row]);
+            let at = row * d.len + from;
+            let zr = &z[at..][..yr.len()];
+            let residual = residual.map(|r| (&r.values[at..], r.bias.map(|b| b[row % d.channels])));
+            vectorized!(arch, <'a> (
+                yr: &'a mut [f32] = yr, gr: &'a mut [f32] = gr, zr: &'a [f32] = zr,
+                s: f32 = s, h: f32 = h, residual: Option<(&'a [f32], Option<f32>)> = residual,
+            ) -> () {
+                silu_and_sigmoid(yr, gr, zr, residual, s, h)
+            });
+        });
+        return (y, stats, Some(sigmoid));
+    }
     // Pass 2: y = silu(z scale + shift) (+ residual).
     let y = super::rows_by_blocks(rows, d.len, |row, from, yr| {
         let (s, h) = (maps.scale[row], maps.shift[row]);
@@ -575,7 +621,47 @@ pub(crate) fn norm_silu_forward(
             }),
         }
     });
-    (y, stats)
+    (y, stats, None)
+}
+
+/// `y = a sigmoid(a) + extra` and `g = sigmoid(a)` for `a = z s + h`, where `extra` is
+/// nothing, `r` or `r + rb` ([`norm_silu_forward`]'s three forms, in the same operations).
+#[inline(always)]
+fn silu_and_sigmoid(
+    yr: &mut [f32],
+    gr: &mut [f32],
+    zr: &[f32],
+    residual: Option<(&[f32], Option<f32>)>,
+    s: f32,
+    h: f32,
+) {
+    let out = yr.iter_mut().zip(gr.iter_mut()).zip(zr);
+    match residual {
+        None => {
+            for ((y, g), &z) in out {
+                let a = z * s + h;
+                let sg = sigmoid(a);
+                *g = sg;
+                *y = a * sg;
+            }
+        }
+        Some((rr, None)) => {
+            for (((y, g), &z), &r) in out.zip(rr) {
+                let a = z * s + h;
+                let sg = sigmoid(a);
+                *g = sg;
+                *y = a * sg + r;
+            }
+        }
+        Some((rr, Some(rb))) => {
+            for (((y, g), &z), &r) in out.zip(rr) {
+                let a = z * s + h;
+                let sg = sigmoid(a);
+                *g = sg;
+                *y = a * sg + (r + rb);
+            }
+        }
+    }
 }
 
 /// Gradients of [`norm_silu_forward`] (the tests' allocating form).
@@ -602,7 +688,7 @@ pub(crate) fn norm_silu_backward(
 ) -> NormSiluGrads {
     let mut dz = gy.to_vec();
     let [dbias, dgamma, dbeta] =
-        norm_silu_backward_in_place(&mut dz, z, bias, gamma, beta, stats, d);
+        norm_silu_backward_in_place(&mut dz, z, bias, gamma, beta, stats, d, None);
     NormSiluGrads {
         dz,
         dbias,
@@ -619,6 +705,7 @@ pub(crate) fn norm_silu_backward(
 /// `m2 = mean(gamma ga xhat)`: `dz = rstd (gamma ga - m1 - xhat m2)`, `dgamma = sum ga xhat`,
 /// `dbeta = sum ga`, `dbias = sum dz`. Per row this is two passes: `ga` with the sums
 /// `sum ga`, `sum ga z`, then `dz` as an affine map of `(ga, z)`.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn norm_silu_backward_in_place(
     grad: &mut [f32],
     z: &[f32],
@@ -627,6 +714,7 @@ pub(crate) fn norm_silu_backward_in_place(
     beta: &[f32],
     stats: &NormStats,
     d: NormDims,
+    sigmoid_kept: Option<&[f32]>,
 ) -> [Vec<f32>; 3] {
     let rows = d.batch * d.channels;
     assert_eq!(grad.len(), rows * d.len, "norm_silu_backward: gy");
@@ -635,12 +723,35 @@ pub(crate) fn norm_silu_backward_in_place(
     let maps = row_maps(bias, gamma, beta, stats, d);
     let dz = grad;
     // Pass 1: ga over gy; per row (sum ga, sum ga z).
+    if let Some(kept) = sigmoid_kept {
+        assert_eq!(kept.len(), z.len(), "norm_silu_backward: kept sigmoids");
+    }
     let sums_ga: Vec<(f64, f64)> = dz
         .par_chunks_exact_mut(d.len)
         .zip(z.par_chunks_exact(d.len))
         .enumerate()
         .map(|(row, (out, zr))| {
             let (s, h) = (maps.scale[row], maps.shift[row]);
+            if let Some(kept) = sigmoid_kept {
+                // The forward pass's sigmoids: the same values, read instead of computed.
+                let gr = &kept[row * d.len..(row + 1) * d.len];
+                return vectorized!(arch, <'a> |simd| (
+                    out: &'a mut [f32] = out, zr: &'a [f32] = zr, gr: &'a [f32] = gr,
+                    s: f32 = s, h: f32 = h,
+                ) -> (f64, f64) {
+                    let mut total = (0.0f64, 0.0f64);
+                    for ((o, zb), gb) in out.chunks_mut(BLOCK).zip(zr.chunks(BLOCK)).zip(gr.chunks(BLOCK)) {
+                        for ((o, &z), &sg) in o.iter_mut().zip(zb).zip(gb) {
+                            let a = z * s + h;
+                            *o *= sg * (1.0 + a * (1.0 - sg));
+                        }
+                        let (s1, s2) = sums_v(simd, o, zb);
+                        total.0 += f64::from(s1);
+                        total.1 += f64::from(s2);
+                    }
+                    total
+                });
+            }
             vectorized!(arch, <'a> |simd| (
                 out: &'a mut [f32] = out, zr: &'a [f32] = zr, s: f32 = s, h: f32 = h,
             ) -> (f64, f64) {
@@ -844,6 +955,55 @@ mod tests {
 
     /// Group norm + SiLU against a direct f64 evaluation, and the backward pass against
     /// central finite differences of `sum(y * gy)` in f64.
+    /// The forward pass that keeps its sigmoids gives the same outputs, and the backward pass
+    /// that reads them the same gradients, bit for bit, with each form of residual.
+    #[test]
+    fn kept_sigmoids_give_the_same_bits() {
+        let d = NormDims {
+            batch: 2,
+            channels: 4,
+            len: 300,
+            groups: 2,
+            epsilon: 1e-5,
+        };
+        let n = d.batch * d.channels * d.len;
+        let z: Vec<f32> = values(n, 14).iter().map(|v| v * 3.0 - 0.2).collect();
+        let (bias, gamma, beta) = (values(4, 15), values(4, 16), values(4, 17));
+        let (r, rb, gy) = (values(n, 18), values(4, 19), values(n, 20));
+        for residual in [
+            None,
+            Some(Residual {
+                values: &r,
+                bias: None,
+            }),
+            Some(Residual {
+                values: &r,
+                bias: Some(&rb),
+            }),
+        ] {
+            let (y, stats) = norm_silu_forward(&z, &bias, &gamma, &beta, d, residual);
+            let (y_kept, stats_kept, sigmoid) =
+                norm_silu_forward_keeping_sigmoid(&z, &bias, &gamma, &beta, d, residual);
+            assert_eq!(y, y_kept);
+            assert_eq!(stats.rstd, stats_kept.rstd);
+            let (mut g, mut g_kept) = (gy.clone(), gy.clone());
+            let grads =
+                norm_silu_backward_in_place(&mut g, &z, &bias, &gamma, &beta, &stats, d, None);
+            let grads_kept = norm_silu_backward_in_place(
+                &mut g_kept,
+                &z,
+                &bias,
+                &gamma,
+                &beta,
+                &stats,
+                d,
+                Some(&sigmoid),
+            );
+            assert_eq!(g, g_kept);
+            assert_eq!(grads, grads_kept);
+        }
+    }
+
     #[test]
     fn norm_silu_matches_definition_and_finite_differences() {
         let d = NormDims {

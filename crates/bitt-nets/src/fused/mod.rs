@@ -272,7 +272,7 @@ impl Backward<Flex, 5> for ConvNormSiluBackward {
         let mut buffer = output_gradient_buffer(&mut gy, s.z.len());
         let dz = buffer.as_mut_slice();
         let [dbias, dgamma, dbeta] = kernels::norm_silu_backward_in_place(
-            dz, &s.z, &s.bias, &s.gamma, &s.beta, &s.stats, s.norm,
+            dz, &s.z, &s.bias, &s.gamma, &s.beta, &s.stats, s.norm, None,
         );
         let dz: &[f32] = dz;
         register_channel_grads(

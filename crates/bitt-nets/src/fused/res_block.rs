@@ -231,6 +231,32 @@ struct Half {
     /// The convolution's output without bias.
     z: Arc<Vec<f32>>,
     stats: Arc<NormStats>,
+    /// The SiLU's sigmoids, kept for blocks up to [`KEEP_SIGMOIDS_UP_TO`] values.
+    sigmoid: Option<Arc<Vec<f32>>>,
+}
+
+/// Values per half up to which the forward pass keeps the SiLU's sigmoids for the backward
+/// pass (4 MiB values, 16 MiB): every block of the `quick` preset (at most 2 x 8 x 28,544),
+/// none of `paper`'s larger levels, whose memory stays as it was. Reading them back instead
+/// of computing `1 / (1 + e^-a)` again made `bench-nets step --preset quick` about 8 %
+/// faster (`docs/training.md`); the values are the same, so are the gradients.
+const KEEP_SIGMOIDS_UP_TO: usize = 1 << 22;
+
+/// [`kernels::norm_silu_forward`], keeping the sigmoids when the block is small enough.
+fn norm_silu(
+    z: &[f32],
+    [bias, gamma, beta]: [&[f32]; 3],
+    d: NormDims,
+    residual: Option<Residual<'_>>,
+) -> (Vec<f32>, NormStats, Option<Arc<Vec<f32>>>) {
+    if z.len() <= KEEP_SIGMOIDS_UP_TO {
+        let (y, stats, sigmoid) =
+            kernels::norm_silu_forward_keeping_sigmoid(z, bias, gamma, beta, d, residual);
+        (y, stats, Some(Arc::new(sigmoid)))
+    } else {
+        let (y, stats) = kernels::norm_silu_forward(z, bias, gamma, beta, d, residual);
+        (y, stats, None)
+    }
 }
 
 /// What the backward pass keeps.
@@ -252,7 +278,7 @@ fn forward(inputs: &Inputs<'_>, dims: BlockDims) -> (FlexTensor, Saved) {
     let xs = x.as_slice::<f32>().expect("contiguous f32");
     let [w1, b1, g1, be1] = inputs.first.map(|t| Arc::new(values(t)));
     let z1 = kernels::conv_forward(xs, &w1, dims.first);
-    let (h, stats1) = kernels::norm_silu_forward(&z1, &b1, &g1, &be1, dims.norm1, None);
+    let (h, stats1, sigmoid1) = norm_silu(&z1, [&b1, &g1, &be1], dims.norm1, None);
     let [w2, b2, g2, be2] = inputs.second.map(|t| Arc::new(values(t)));
     let z2 = kernels::conv_forward(&h, &w2, dims.second);
     let skip = inputs
@@ -272,7 +298,7 @@ fn forward(inputs: &Inputs<'_>, dims: BlockDims) -> (FlexTensor, Saved) {
             bias: None,
         },
     };
-    let (y, stats2) = kernels::norm_silu_forward(&z2, &b2, &g2, &be2, dims.norm2, Some(residual));
+    let (y, stats2, sigmoid2) = norm_silu(&z2, [&b2, &g2, &be2], dims.norm2, Some(residual));
     let y = flex_tensor(y, [dims.second.batch, dims.second.c_out, dims.second.len]);
     let saved = Saved {
         first: Half {
@@ -281,6 +307,7 @@ fn forward(inputs: &Inputs<'_>, dims: BlockDims) -> (FlexTensor, Saved) {
             norm: dims.norm1,
             z: Arc::new(z1),
             stats: Arc::new(stats1),
+            sigmoid: sigmoid1,
         },
         h: Arc::new(h),
         second: Half {
@@ -289,6 +316,7 @@ fn forward(inputs: &Inputs<'_>, dims: BlockDims) -> (FlexTensor, Saved) {
             norm: dims.norm2,
             z: Arc::new(z2),
             stats: Arc::new(stats2),
+            sigmoid: sigmoid2,
         },
         skip: skip.map(|(weight, _, d)| (weight, d)),
         x,
@@ -401,6 +429,7 @@ fn half_backward(
         beta,
         &half.stats,
         half.norm,
+        half.sigmoid.as_ref().map(|s| s.as_slice()),
     );
     let [weight_id, channel_ids @ ..] = ids;
     register_channel_grads(grads, channel_ids, [dbias, dgamma, dbeta]);
