@@ -343,15 +343,9 @@ pub(crate) fn pair_by_blocks(
             .for_each(|(i, (da, db))| {
                 let (mut la, mut lb) = ([0.0f32; PAIR_BLOCK], [0.0f32; PAIR_BLOCK]);
                 let (start, n) = (i * PAIR_BLOCK, da.len());
-                // A block may span the end of one row and the start of the next.
-                let mut p = start;
-                while p < start + n {
-                    let (row, from) = (p / len, p % len);
-                    let m = (len - from).min(start + n - p);
-                    let at = p - start;
+                super::row_segments(start, n, len, |row, from, at, m| {
                     f(row, from, &mut la[at..at + m], &mut lb[at..at + m]);
-                    p += m;
-                }
+                });
                 for (d, &v) in da.iter_mut().zip(&la[..n]) {
                     d.write(v);
                 }

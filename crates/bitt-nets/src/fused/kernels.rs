@@ -406,6 +406,13 @@ fn sums(a: &[f32], b: &[f32]) -> (f32, f32) {
             s2[i] += x[i] * y[i];
         }
     }
+    lane_totals(&s1, &s2, ar, br)
+}
+
+/// The end of [`sums`] and [`sums_v`]: each lane array summed in lane order, then the
+/// remainder `(a, b)` added one by one.
+#[inline(always)]
+fn lane_totals(s1: &[f32; LANES], s2: &[f32; LANES], ar: &[f32], br: &[f32]) -> (f32, f32) {
     let mut t1: f32 = s1.iter().sum();
     let mut t2: f32 = s2.iter().sum();
     for (x, y) in ar.iter().zip(br) {
@@ -434,13 +441,7 @@ fn sums_v<S: Simd>(simd: S, a: &[f32], b: &[f32]) -> (f32, f32) {
     let (mut l1, mut l2) = ([0.0f32; LANES], [0.0f32; LANES]);
     S::as_mut_simd_f32s(&mut l1).0[0] = s1;
     S::as_mut_simd_f32s(&mut l2).0[0] = s2;
-    let mut t1: f32 = l1.iter().sum();
-    let mut t2: f32 = l2.iter().sum();
-    for (x, y) in ar.iter().zip(br) {
-        t1 += x;
-        t2 += x * y;
-    }
-    (t1, t2)
+    lane_totals(&l1, &l2, ar, br)
 }
 
 /// `exp(x)` for `x` in `[-87, 88]` (clamped outside), relative error below 3e-7: `2^n p(r)`

@@ -316,6 +316,25 @@ fn values(t: &FlexTensor) -> Vec<f32> {
         .to_vec()
 }
 
+/// The parts of rows in the block of `n` values starting at flat index `start` of a
+/// `[rows, len]` buffer (a block may span the end of one row and the start of the next):
+/// `f(row, from, at, count)` for `count` values of `row` from column `from`, at offset `at`
+/// in the block.
+pub(crate) fn row_segments(
+    start: usize,
+    n: usize,
+    len: usize,
+    mut f: impl FnMut(usize, usize, usize, usize),
+) {
+    let mut p = start;
+    while p < start + n {
+        let (row, from) = (p / len, p % len);
+        let count = (len - from).min(start + n - p);
+        f(row, from, p - start, count);
+        p += count;
+    }
+}
+
 /// Floats per block of [`rows_by_blocks`].
 const ROW_BLOCK: usize = 256;
 
@@ -340,14 +359,9 @@ pub(crate) fn rows_by_blocks(
             let mut out = [0.0f32; ROW_BLOCK];
             let start = i * ROW_BLOCK;
             let end = (start + ROW_BLOCK).min(total);
-            // A block may span the end of one row and the start of the next.
-            let mut p = start;
-            while p < end {
-                let (row, from) = (p / len, p % len);
-                let n = (len - from).min(end - p);
-                f(row, from, &mut out[p - start..p - start + n]);
-                p += n;
-            }
+            row_segments(start, end - start, len, |row, from, at, n| {
+                f(row, from, &mut out[at..at + n]);
+            });
             out
         })
         .collect();
