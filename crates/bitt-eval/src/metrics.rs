@@ -482,6 +482,61 @@ pub fn mask_iou(a: &[f32], b: &[f32]) -> f64 {
     }
 }
 
+/// How much of `photo`'s fine detail `render` reproduces where it should (issue 34: "the
+/// hair and veins are gone"): the correlation of the two images' high-passes, each pixel's
+/// value minus the mean of its [`crate::evaluate::DETAIL_WINDOW`]-square window, over the
+/// masked pixels whose whole window is masked (so no silhouette edge enters), all channels
+/// together. 1: every vein, hair and crease in place; 0: none (a smooth texture, or detail
+/// that lands beside the photo's). `None` with fewer than 100 such pixels, or an image
+/// with no detail there.
+///
+/// # Panics
+/// When the lengths differ from `c * h * w` (images) or `h * w` (mask).
+pub fn detail_correlation(
+    render: &[f32],
+    photo: &[f32],
+    mask: &[f32],
+    [c, h, w]: [usize; 3],
+) -> Option<f64> {
+    assert_eq!(render.len(), c * h * w);
+    assert_eq!(photo.len(), c * h * w);
+    assert_eq!(mask.len(), h * w);
+    let r = crate::evaluate::DETAIL_WINDOW / 2;
+    let inside = |y: usize, x: usize| mask[y * w + x] >= 0.5;
+    let kept: Vec<usize> = (r..h.saturating_sub(r))
+        .flat_map(|y| (r..w - r).map(move |x| (y, x)))
+        .filter(|&(y, x)| (y - r..=y + r).all(|yy| (x - r..=x + r).all(|xx| inside(yy, xx))))
+        .map(|(y, x)| y * w + x)
+        .collect();
+    if kept.len() < 100 {
+        return None;
+    }
+    let n = ((2 * r + 1) * (2 * r + 1)) as f64;
+    let high_pass = |image: &[f32], ch: usize, p: usize| {
+        let (y, x) = (p / w, p % w);
+        let plane = &image[ch * h * w..(ch + 1) * h * w];
+        let sum: f64 = (y - r..=y + r)
+            .flat_map(|yy| (x - r..=x + r).map(move |xx| f64::from(plane[yy * w + xx])))
+            .sum();
+        f64::from(plane[p]) - sum / n
+    };
+    let (mut sa, mut sb, mut saa, mut sbb, mut sab) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for ch in 0..c {
+        for &p in &kept {
+            let (a, b) = (high_pass(render, ch, p), high_pass(photo, ch, p));
+            sa += a;
+            sb += b;
+            saa += a * a;
+            sbb += b * b;
+            sab += a * b;
+        }
+    }
+    let m = (c * kept.len()) as f64;
+    let cov = sab / m - (sa / m) * (sb / m);
+    let (va, vb) = (saa / m - (sa / m).powi(2), sbb / m - (sb / m).powi(2));
+    (va > 1e-12 && vb > 1e-12).then(|| cov / (va * vb).sqrt())
+}
+
 #[cfg(test)]
 mod tests {
 
@@ -492,6 +547,45 @@ mod tests {
             1.0 / 3.0
         );
         assert_eq!(mask_iou(&[0.0; 3], &[0.0; 3]), 1.0);
+    }
+
+    #[test]
+    fn detail_correlation_reads_detail_in_place() {
+        let (c, h, w) = (3, 32, 32);
+        // A smooth gradient (skin) with fine stripes (veins) inside a square mask.
+        let veins = |y: usize, x: usize| if (x + 2 * y) % 7 < 2 { 0.2 } else { 0.0 };
+        let photo = ramp(c, h, w, |ch, y, x| {
+            0.3 + 0.01 * y as f32 + veins(y, x) + 0.05 * ch as f32
+        });
+        let mask = ramp(1, h, w, |_, y, x| {
+            f32::from((4..28).contains(&y) && (4..28).contains(&x))
+        });
+        let dims = [c, h, w];
+        let same = detail_correlation(&photo, &photo, &mask, dims).unwrap();
+        assert!((same - 1.0).abs() < 1e-9, "{same}");
+        // The same detail at half the contrast on another colour: still fully in place.
+        let fainter = ramp(c, h, w, |_, y, x| 0.6 + 0.5 * veins(y, x));
+        let f = detail_correlation(&fainter, &photo, &mask, dims).unwrap();
+        assert!((f - 1.0).abs() < 1e-6, "{f}");
+        // The stripes three pixels off: they no longer line up.
+        let shifted = ramp(c, h, w, |_, y, x| 0.6 + veins(y, x + 3));
+        let s = detail_correlation(&shifted, &photo, &mask, dims).unwrap();
+        assert!(s < 0.2, "{s}");
+        // A smooth render has no detail to correlate; so has a mask too small for a window.
+        let smooth = ramp(c, h, w, |_, y, _| 0.3 + 0.01 * y as f32);
+        assert_eq!(detail_correlation(&smooth, &photo, &mask, dims), None);
+        let speck = ramp(1, h, w, |_, y, x| f32::from(y < 6 && x < 6));
+        assert_eq!(detail_correlation(&photo, &photo, &speck, dims), None);
+        // Pixels outside the mask do not count, even a wild silhouette next to it.
+        let wild = ramp(c, h, w, |ch, y, x| {
+            if (4..28).contains(&y) && (4..28).contains(&x) {
+                photo[ch * h * w + y * w + x]
+            } else {
+                ((x * 7 + y * 13) % 5) as f32
+            }
+        });
+        let edge = detail_correlation(&wild, &photo, &mask, dims).unwrap();
+        assert!((edge - 1.0).abs() < 1e-9, "{edge}");
     }
     use super::*;
 

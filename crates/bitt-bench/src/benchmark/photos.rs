@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use super::SceneResult;
 use bitt::BittError;
-use bitt::metrics::{ImageMetrics, SsimWindow, masked_image_metrics};
+use bitt::metrics::{ImageMetrics, SsimWindow, detail_correlation, masked_image_metrics};
 use bitt::real::{RealScene, RealView, annotation_view};
 use bitt::refine::{MASK_THRESHOLD, holes, threshold_mask};
 use bitt_stdx::WithContext;
@@ -65,6 +65,11 @@ pub struct PhotoMetrics {
     /// Holes: the fraction of the photo's hand pixels inside the rendered hands' outline
     /// that the render leaves uncovered ([`bitt::refine::holes`]).
     pub holes: f64,
+    /// How much of the photo's fine detail (veins, hair, creases) the render has in place,
+    /// over the pixels that are both rendered and hand ([`detail_correlation`]; issue 34).
+    /// `None` in results made before it, or where there is too little to correlate.
+    #[serde(default)]
+    pub detail: Option<f64>,
 }
 
 /// A photo scene's scores per method: the input view and the mean over the other photos.
@@ -98,6 +103,11 @@ pub fn mean_photo_metrics(all: &[PhotoMetrics]) -> Option<PhotoMetrics> {
         rendered_and_hand: bitt::evaluate::mean_metrics(&both)?,
         coverage: mean(&|m| m.coverage),
         holes: mean(&|m| m.holes),
+        detail: all
+            .iter()
+            .map(|m| m.detail)
+            .sum::<Option<f64>>()
+            .map(|s| s / n),
     })
 }
 
@@ -130,6 +140,7 @@ pub fn photo_metrics(
         rendered_and_hand,
         coverage: covered / hand_pixels,
         holes: holes(&drawn, &hand_bool, [size, size]),
+        detail: detail_correlation(render, photo, &both, dims),
     })
 }
 
@@ -368,6 +379,8 @@ mod tests {
             "{}",
             m.hand_mask.l1
         );
+        // A flat square has no detail to correlate, and too few pixels anyway.
+        assert_eq!(m.detail, None);
         assert!(photo_metrics(&render, &vec![0.0; 3 * hw], &rendered, s).is_none());
     }
 
