@@ -110,7 +110,7 @@ pub struct UnseenDetail {
 }
 
 /// Side of the square UV window [`unseen_detail`]'s high-pass subtracts the mean of.
-pub const DETAIL_WINDOW: usize = 5;
+pub use crate::metrics::DETAIL_WINDOW;
 
 /// How much detail `texture` (`[3, T]` per hand) invented where neither photo shows the
 /// hand: over the texels of `region` that are visible in neither hand (BTR's other source is

@@ -482,9 +482,13 @@ pub fn mask_iou(a: &[f32], b: &[f32]) -> f64 {
     }
 }
 
+/// Side of the square window a high-pass subtracts the mean of: image pixels in
+/// [`detail_correlation`], UV texels in the `evaluate` module's `unseen_detail`.
+pub const DETAIL_WINDOW: usize = 5;
+
 /// How much of `photo`'s fine detail `render` reproduces where it should (issue 34: "the
 /// hair and veins are gone"): the correlation of the two images' high-passes, each pixel's
-/// value minus the mean of its [`crate::evaluate::DETAIL_WINDOW`]-square window, over the
+/// value minus the mean of its [`DETAIL_WINDOW`]-square window, over the
 /// masked pixels whose whole window is masked (so no silhouette edge enters), all channels
 /// together. 1: every vein, hair and crease in place; 0: none (a smooth texture, or detail
 /// that lands beside the photo's). `None` with fewer than 100 such pixels, or an image
@@ -501,7 +505,7 @@ pub fn detail_correlation(
     assert_eq!(render.len(), c * h * w);
     assert_eq!(photo.len(), c * h * w);
     assert_eq!(mask.len(), h * w);
-    let r = crate::evaluate::DETAIL_WINDOW / 2;
+    let r = DETAIL_WINDOW / 2;
     let inside = |y: usize, x: usize| mask[y * w + x] >= 0.5;
     let kept: Vec<usize> = (r..h.saturating_sub(r))
         .flat_map(|y| (r..w - r).map(move |x| (y, x)))
