@@ -212,8 +212,8 @@ pub struct LossWeights {
     #[serde(default = "yes")]
     pub photo_light: bool,
     /// Real photos only: the point light's location is chosen once from the photo's shading
-    /// and held there (`bitt_train::light_search`); the light network still estimates the
-    /// colours. `false` lets the network estimate the location, as the paper does. Not from
+    /// and held there (`bitt_train::light_search`); the colours too with
+    /// `photo_light_colours`. `false` lets the network estimate the location, as the paper does. Not from
     /// the paper: on the demo photos, lit from every side, the estimated location ended in
     /// a corner of its box that small changes of the meshes flipped, one corner 2.5 dB worse
     /// at the other photo's pose (issue 34; docs/results/photos.md, The light's location).
@@ -221,6 +221,18 @@ pub struct LossWeights {
     /// render as they were trained.
     #[serde(default)]
     pub photo_light_search: bool,
+    /// Real photos only: the light's ambient and diffuse colours come from the same fit as
+    /// its location (`bitt_train::light_search`) and are held; the light network is not
+    /// used. Needs `photo_light_search`. `false` lets the network estimate the colours, as
+    /// the paper does. Not from the paper: on the demo photos the network pushed most of its
+    /// nine colour outputs to an end of their range (`0.6 ± 0.4 tanh(1)`), where they have no
+    /// gradient left, and which end depended on the seed: the light was another one in
+    /// every run, and the run on `01` ended in one of two places, one 1.3 dB worse at the
+    /// other photo's pose (issue 34; docs/results/photos.md, The light's colours). A
+    /// `config.json` written before this option reads `false`, so older runs resume and
+    /// render as they were trained.
+    #[serde(default)]
+    pub photo_light_colours: bool,
     /// Real photos only: how strongly the scene is shaded with ambient occlusion between and
     /// within the hands (`ViewGeometry::with_occlusion`): every pixel's shaded colour is
     /// scaled by `1 - photo_occlusion (1 - ao)`, in training and in every render of the
@@ -264,6 +276,7 @@ impl Default for LossWeights {
             photo_mask: photo_mask_default(),
             photo_light: true,
             photo_light_search: true,
+            photo_light_colours: true,
             photo_occlusion: 0.0,
             photo_prior_colour: false,
         }
@@ -497,6 +510,13 @@ impl TrainConfig {
         check_fields("loss", &terms, weight)?;
         check_field("loss.photo_mask", w.photo_mask, Bounds::UNIT)?;
         check_field("loss.photo_occlusion", w.photo_occlusion, Bounds::UNIT)?;
+        if w.photo_light_colours && !w.photo_light_search {
+            return bad(
+                "loss.photo_light_colours needs loss.photo_light_search: the colours are \
+                 fitted at the location the search chooses"
+                    .into(),
+            );
+        }
         Ok(())
     }
 
@@ -563,7 +583,8 @@ mod tests {
 
     /// The occlusion strength and the photo mask are refused outside [0, 1], naming the
     /// field; a config written before the occlusion existed reads as 0 (those runs were
-    /// trained without it), and the prior's colour gain is off unless asked for.
+    /// trained without it), the prior's colour gain is off unless asked for, and the light's
+    /// colours are held only with the location search.
     #[test]
     fn photo_shading_fields_are_checked_and_old_configs_keep_phong() {
         let mut c = TrainConfig::preset(Preset::Quick);
@@ -596,6 +617,25 @@ mod tests {
         let old =
             TrainConfig::from_json(&value.to_string(), std::path::Path::new("c.json")).unwrap();
         assert!(!old.loss.photo_prior_colour);
+        // The light's colours are held by default, refused without the location search
+        // they are fitted with, and a config from before them lets the network give them.
+        let mut c = TrainConfig::preset(Preset::Quick);
+        assert!(c.loss.photo_light_search && c.loss.photo_light_colours);
+        c.loss.photo_light_search = false;
+        let e = c.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("photo_light_colours needs loss.photo_light_search"),
+            "{e}"
+        );
+        c.loss.photo_light_colours = false;
+        c.validate().unwrap();
+        value["loss"]
+            .as_object_mut()
+            .unwrap()
+            .remove("photo_light_colours");
+        let old =
+            TrainConfig::from_json(&value.to_string(), std::path::Path::new("c.json")).unwrap();
+        assert!(!old.loss.photo_light_colours);
     }
 
     /// Every configuration's numbers are refused the same way: the field, the value and the

@@ -13,7 +13,16 @@
 //! trusted hand pixels are fitted (least squares, per channel, both factors non-negative) as
 //! `a · T + b · T max(0, n·l)`, the ambient and diffuse renders of the mean texture `T`, and
 //! the candidate with the smallest residual wins. The forward pass then holds the light there
-//! ([`TrainingView::light_location`]); the light network still estimates the colours.
+//! ([`TrainingView::light_location`]).
+//!
+//! The same fit gives the light's ambient and diffuse colours at that place (`a` and `b` per
+//! channel, made one colour when the view's light has one, [`one_colour`]). With
+//! `loss.photo_light_colours` the forward pass holds them too ([`TrainingView::light_colours`])
+//! and the light network is not used. The network's twelve outputs end in two `tanh` in a
+//! row; on the demo photos training pushed most of them to an end of their range, where they
+//! have no gradient left, and which end each reached depended on the seed: the light came out
+//! different in every run, and one of two places the run on `01` ends in scored 1.3 dB worse
+//! at the other photo's pose (docs/results/photos.md, The light's colours).
 
 use bitt_mesh::light::LightValues;
 use bitt_render::scene::LightValuesExt;
@@ -38,6 +47,11 @@ pub struct LightSearch {
     pub candidates: Vec<([f32; 3], f64)>,
     /// Pixels the fit used.
     pub pixels: usize,
+    /// The fitted ambient colour at the chosen location (`a` per channel; one colour when the
+    /// view's light has one).
+    pub ambient: [f32; 3],
+    /// The fitted diffuse colour at the chosen location (`b` per channel, likewise).
+    pub diffuse: [f32; 3],
 }
 
 /// The candidate locations: the grid `{-REACH, 0, REACH}^3` without the camera's own
@@ -89,21 +103,64 @@ impl Trainer {
         let photo = to_host(view.image.clone())?;
         let ambient = render(light(1.0, 0.0, [0.0; 3]))?;
         let mut scored = Vec::new();
-        for c in candidates() {
+        let mut best: Option<(usize, ShadingFit)> = None;
+        for (i, c) in candidates().into_iter().enumerate() {
             let diffuse = render(light(0.0, 1.0, c))?;
-            scored.push((c, relative_residual(&photo, &ambient, &diffuse, &pixels)));
+            let fit = fit_shading(&photo, &ambient, &diffuse, &pixels);
+            scored.push((c, fit.residual));
+            if best.as_ref().is_none_or(|(_, b)| fit.residual < b.residual) {
+                best = Some((i, fit));
+            }
         }
-        let best = scored
-            .iter()
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .map(|c| c.0)
-            .ok_or_else(|| TrainError::Invalid("no light candidate".into()))?;
+        let (i, fit) = best.ok_or_else(|| TrainError::Invalid("no light candidate".into()))?;
+        let [ambient, diffuse] = if view.one_colour_light {
+            one_colour(fit.ambient, fit.diffuse)
+        } else {
+            [fit.ambient, fit.diffuse]
+        };
         Ok(LightSearch {
-            location: best,
+            location: scored[i].0,
             candidates: scored,
             pixels: pixels.len(),
+            ambient,
+            diffuse,
         })
     }
+}
+
+/// The ambient and diffuse colours as one colour, as [`bitt_nets::LightParams::one_colour`]
+/// makes the network's: the colour of both together, `c = (a + b) / mean(a + b)`, and each
+/// part its mean as an intensity of it (`a' = c mean(a)`, `b' = c mean(b)`). A light with
+/// nothing in it stays dark.
+pub fn one_colour(ambient: [f32; 3], diffuse: [f32; 3]) -> [[f32; 3]; 2] {
+    let mean = |v: [f32; 3]| v.iter().sum::<f32>() / 3.0;
+    let sum = [0, 1, 2].map(|c| ambient[c] + diffuse[c]);
+    let total = mean(sum);
+    if total <= 0.0 {
+        return [[0.0; 3]; 2];
+    }
+    let colour = sum.map(|v| v / total);
+    [
+        colour.map(|c| c * mean(ambient)),
+        colour.map(|c| c * mean(diffuse)),
+    ]
+}
+
+/// The best non-negative fit `photo ≈ a · ambient + b · diffuse` per channel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ShadingFit {
+    /// `a` per channel.
+    pub ambient: [f32; 3],
+    /// `b` per channel.
+    pub diffuse: [f32; 3],
+    /// The residual sum of squares over the photo's sum of squares.
+    pub residual: f64,
+}
+
+/// The residual of the best non-negative fit `photo ≈ a · ambient + b · diffuse` per
+/// channel, over the photo's sum of squares ([`fit_shading`]).
+pub fn relative_residual(photo: &[f32], ambient: &[f32], diffuse: &[f32], pixels: &[usize]) -> f64 {
+    fit_shading(photo, ambient, diffuse, pixels).residual
 }
 
 /// The pixels the fit uses: covered by the meshes and trusted.
@@ -124,12 +181,17 @@ fn fitted_pixels(view: &TrainingView) -> Result<Vec<usize>, TrainError> {
     Ok(pixels)
 }
 
-/// The residual of the best non-negative fit `photo ≈ a · ambient + b · diffuse` per
-/// channel (images `[3, S, S]` channel-major, `pixels` indices into one channel), over the
-/// photo's sum of squares.
-pub fn relative_residual(photo: &[f32], ambient: &[f32], diffuse: &[f32], pixels: &[usize]) -> f64 {
+/// The best non-negative fit `photo ≈ a · ambient + b · diffuse` per channel (images
+/// `[3, S, S]` channel-major, `pixels` indices into one channel).
+pub fn fit_shading(
+    photo: &[f32],
+    ambient: &[f32],
+    diffuse: &[f32],
+    pixels: &[usize],
+) -> ShadingFit {
     let n = photo.len() / 3;
     let (mut residual, mut total) = (0.0, 0.0);
+    let (mut fit_a, mut fit_b) = ([0.0f32; 3], [0.0f32; 3]);
     for c in 0..3 {
         let at = |v: &[f32], i: usize| f64::from(v[c * n + i]);
         let (mut aa, mut ab, mut bb, mut ap, mut bp, mut pp) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
@@ -146,25 +208,38 @@ pub fn relative_residual(photo: &[f32], ambient: &[f32], diffuse: &[f32], pixels
         let rss = |x: f64, y: f64| {
             pp - 2.0 * (x * ap + y * bp) + x * x * aa + 2.0 * x * y * ab + y * y * bb
         };
-        let mut best = pp;
+        // The candidates: both factors free, then each alone (the non-negative optimum is
+        // one of them, or nothing at all).
+        let mut options = vec![(0.0, 0.0)];
         let det = aa * bb - ab * ab;
         if det > 1e-12 * aa * bb {
             let x = (bb * ap - ab * bp) / det;
             let y = (aa * bp - ab * ap) / det;
             if x >= 0.0 && y >= 0.0 {
-                best = best.min(rss(x, y));
+                options.push((x, y));
             }
         }
         if aa > 0.0 {
-            best = best.min(rss((ap / aa).max(0.0), 0.0));
+            options.push(((ap / aa).max(0.0), 0.0));
         }
         if bb > 0.0 {
-            best = best.min(rss(0.0, (bp / bb).max(0.0)));
+            options.push((0.0, (bp / bb).max(0.0)));
         }
+        let (x, y, best) = options
+            .into_iter()
+            .map(|(x, y)| (x, y, rss(x, y)))
+            .min_by(|a, b| a.2.total_cmp(&b.2))
+            .expect("nothing is always an option");
+        fit_a[c] = x as f32;
+        fit_b[c] = y as f32;
         residual += best.max(0.0);
         total += pp;
     }
-    if total > 0.0 { residual / total } else { 0.0 }
+    ShadingFit {
+        ambient: fit_a,
+        diffuse: fit_b,
+        residual: if total > 0.0 { residual / total } else { 0.0 },
+    }
 }
 
 #[cfg(test)]
@@ -191,7 +266,16 @@ mod tests {
             .map(|(a, d)| 0.3 * a + 0.5 * d)
             .collect();
         let all = [0, 1, 2, 3];
-        assert!(relative_residual(&photo, &ambient, &diffuse, &all) < 1e-9);
+        let fit = fit_shading(&photo, &ambient, &diffuse, &all);
+        assert!(fit.residual < 1e-9);
+        assert_eq!(
+            relative_residual(&photo, &ambient, &diffuse, &all),
+            fit.residual
+        );
+        for c in 0..3 {
+            assert!((fit.ambient[c] - 0.3).abs() < 1e-5, "{fit:?}");
+            assert!((fit.diffuse[c] - 0.5).abs() < 1e-5, "{fit:?}");
+        }
         // Another candidate's diffuse image explains it worse.
         let other = [0.4, 0.2, 0.0, 0.1].repeat(3);
         assert!(relative_residual(&photo, &ambient, &other, &all) > 1e-3);
@@ -212,5 +296,31 @@ mod tests {
             .sum();
         let pp: f64 = [0.6f64, 0.5, 0.4, 0.3].iter().map(|p| p * p).sum();
         assert!((r - rss / pp).abs() < 1e-6, "{r} vs {}", rss / pp);
+        let fit = fit_shading(&photo, &ambient, &diffuse, &[0, 1, 2, 3]);
+        assert_eq!(fit.diffuse, [0.0; 3]);
+        assert!(
+            fit.ambient.iter().all(|a| (a - 0.45).abs() < 1e-6),
+            "{fit:?}"
+        );
+        // A photo darker than nothing explains is fitted by nothing.
+        let dark = [-0.1f32; 4].repeat(3);
+        let fit = fit_shading(&dark, &ambient, &diffuse, &[0, 1, 2, 3]);
+        assert_eq!((fit.ambient, fit.diffuse), ([0.0; 3], [0.0; 3]));
+        assert!((fit.residual - 1.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn one_colour_keeps_each_parts_intensity_in_the_colour_of_both() {
+        let [a, d] = one_colour([0.2, 0.2, 0.1], [0.6, 0.4, 0.2]);
+        // Colour (0.8, 0.6, 0.3) / 0.5666...; intensities 0.1666... and 0.4.
+        let colour = [0.8f32, 0.6, 0.3].map(|v| v / (1.7 / 3.0));
+        for c in 0..3 {
+            assert!((a[c] - colour[c] * 0.5 / 3.0).abs() < 1e-6, "{a:?}");
+            assert!((d[c] - colour[c] * 0.4).abs() < 1e-6, "{d:?}");
+        }
+        // The means are kept, and the two parts have one colour.
+        assert!(((a[0] + a[1] + a[2]) / 3.0 - 0.5 / 3.0).abs() < 1e-6);
+        assert!((a[0] / a[2] - d[0] / d[2]).abs() < 1e-5);
+        assert_eq!(one_colour([0.0; 3], [0.0; 3]), [[0.0; 3]; 2]);
     }
 }

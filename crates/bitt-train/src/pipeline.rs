@@ -37,11 +37,17 @@ pub struct TrainingView {
     /// paper's three light colours.
     pub one_colour_light: bool,
     /// Where the forward pass holds the point light (camera frame, metres) instead of the
-    /// light network's location; the network still estimates the colours. `None`: the
+    /// light network's location ([`TrainingView::light_colours`] holds the colours). `None`: the
     /// network's location, as the paper does. Real photos set it from
     /// [`Trainer::search_light_location`](crate::trainer::Trainer::search_light_location)
     /// (`loss.photo_light_search`).
     pub light_location: Option<[f32; 3]>,
+    /// The ambient and diffuse colours the forward pass holds instead of the light
+    /// network's (the specular part is held at 0: the material has none). `None`: the
+    /// network's colours, as the paper does. Real photos set them from the same search as
+    /// [`TrainingView::light_location`] (`loss.photo_light_colours`); with both set the
+    /// light network is not used.
+    pub light_colours: Option<[[f32; 3]; 2]>,
     /// The non-visible term compares BTR's texture with the prior times one gain per colour
     /// channel, the seen texels' colour over the prior's there ([`crate::losses`],
     /// `loss.photo_prior_colour`, real photos only). `false`: the prior as it is, as the
@@ -127,6 +133,7 @@ impl TrainingView {
             one_colour_light: false,
             prior_colour_gain: false,
             light_location: None,
+            light_colours: None,
             mask,
             hand_image,
             plans,
@@ -316,18 +323,34 @@ pub fn forward(
 ) -> Result<Outputs, TrainError> {
     let with_consistency = consistency != Consistency::Off;
     let [_, _, h, w] = view.image.dims();
-    let light = nets.light.predict(view.image.clone());
-    let mut light = point_light(&if view.one_colour_light {
-        light.one_colour()
-    } else {
-        light
-    });
-    if let Some(location) = view.light_location {
-        light.location = Tensor::from_data(
-            TensorData::new(location.to_vec(), [3]),
-            &light.location.device(),
-        );
-    }
+    let device = view.image.device();
+    let held = |v: [f32; 3]| Tensor::from_data(TensorData::new(v.to_vec(), [3]), &device);
+    let light = match (view.light_location, view.light_colours) {
+        // Everything held: the light network is not run.
+        (Some(location), Some([ambient, diffuse])) => PointLight {
+            ambient: held(ambient),
+            diffuse: held(diffuse),
+            specular: held([0.0; 3]),
+            location: held(location),
+        },
+        (location, colours) => {
+            let estimated = nets.light.predict(view.image.clone());
+            let mut light = point_light(&if view.one_colour_light {
+                estimated.one_colour()
+            } else {
+                estimated
+            });
+            if let Some(location) = location {
+                light.location = held(location);
+            }
+            if let Some([ambient, diffuse]) = colours {
+                light.ambient = held(ambient);
+                light.diffuse = held(diffuse);
+                light.specular = held([0.0; 3]);
+            }
+            light
+        }
+    };
     let coeffs = nets.html.predict(view.hand_image.clone());
     let t = assets.num_texels();
     let coarse_both = pca.textures(Tensor::cat(

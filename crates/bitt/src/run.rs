@@ -342,7 +342,11 @@ pub fn write_run(
     )?;
     write_json(
         &dir.join(files::LIGHT),
-        &light_json(&avatar.light, trainer.view.light_location.is_some()),
+        &light_json(
+            &avatar.light,
+            trainer.view.light_location.is_some(),
+            trainer.view.light_colours.is_some(),
+        ),
     )?;
 
     // The avatar, posed as in the input.
@@ -536,11 +540,18 @@ fn score_synthetic(
     })
 }
 
-/// `light.json`: the light, its frame, and where its location came from (`searched`: chosen
-/// from the photo before training, `bitt_train::light_search`; else the light network's).
-fn light_json(l: &LightValues, searched: bool) -> serde_json::Value {
+/// `light.json`: the light, its frame, and where its location and colours came from
+/// (`searched` / `fitted`: chosen from the photo before training, `bitt_train::light_search`;
+/// else the light network's).
+fn light_json(l: &LightValues, searched: bool, fitted: bool) -> serde_json::Value {
     let location_from = if searched {
         "the photo's shading, chosen before training and held (loss.photo_light_search)"
+    } else {
+        "the light network"
+    };
+    let colours_from = if fitted {
+        "the photo's shading, fitted with the location before training and held \
+         (loss.photo_light_colours)"
     } else {
         "the light network"
     };
@@ -551,6 +562,7 @@ fn light_json(l: &LightValues, searched: bool) -> serde_json::Value {
         "location": l.location,
         "frame": "training camera (metres; x right, y down, z forward)",
         "location_from": location_from,
+        "colours_from": colours_from,
     })
 }
 

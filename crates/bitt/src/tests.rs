@@ -951,8 +951,8 @@ fn occlusion_darkens_creases_and_follows_the_training_view() {
 
 /// The real-photo light search (`bitt_train::light_search`, issue 34): a photo shaded by the
 /// prior's mean texture under a light at a grid location is explained best by that
-/// location, whichever of several it is; the forward pass then holds the light there while
-/// the network still gives the colours.
+/// location, whichever of several it is, and the same fit gives the light's colours; the
+/// forward pass then holds the light there, and its colours when asked.
 #[test]
 fn the_light_search_finds_the_location_that_shaded_the_photo() {
     use bitt_train::light_search::REACH;
@@ -991,7 +991,33 @@ fn the_light_search_finds_the_location_that_shaded_the_photo() {
         let (_, best) = found.candidates.iter().find(|(c, _)| *c == target).unwrap();
         assert!(*best < 1e-4, "the shading location leaves {best}");
         assert!(found.pixels > 50, "{} pixels", found.pixels);
+        // The same fit gives the light's colours (three colours: the view's light has them).
+        for (got, want) in [
+            (found.ambient, [0.3, 0.25, 0.2]),
+            (found.diffuse, [0.6, 0.5, 0.4]),
+        ] {
+            for c in 0..3 {
+                assert!((got[c] - want[c]).abs() < 2e-3, "{got:?} vs {want:?}");
+            }
+        }
     }
+    // A view whose light has one colour gets the fit in one colour.
+    t.view.one_colour_light = true;
+    let found = t.search_light_location().unwrap();
+    let [a, d] = bitt_train::light_search::one_colour([0.3, 0.25, 0.2], [0.6, 0.5, 0.4]);
+    for c in 0..3 {
+        assert!(
+            (found.ambient[c] - a[c]).abs() < 2e-3,
+            "{:?}",
+            found.ambient
+        );
+        assert!(
+            (found.diffuse[c] - d[c]).abs() < 2e-3,
+            "{:?}",
+            found.diffuse
+        );
+    }
+    t.view.one_colour_light = false;
     // Held in the forward pass.
     t.view.light_location = Some([REACH, -REACH, -REACH]);
     let outputs = t.forward().unwrap();
@@ -1002,4 +1028,12 @@ fn the_light_search_finds_the_location_that_shaded_the_photo() {
         ambient.iter().all(|&a| (0.2..=1.0).contains(&a)),
         "{ambient:?}"
     );
+    // The colours held too: the light network is not used, and gets no gradient.
+    t.view.light_colours = Some([[0.05, 0.1, 0.15], [1.5, 1.2, 0.9]]);
+    let outputs = t.forward().unwrap();
+    let host = |x: &burn::tensor::Tensor<1>| bitt_stdx::to_host(x.clone().inner()).unwrap();
+    assert_eq!(host(&outputs.light.ambient), vec![0.05, 0.1, 0.15]);
+    assert_eq!(host(&outputs.light.diffuse), vec![1.5, 1.2, 0.9]);
+    assert_eq!(host(&outputs.light.specular), vec![0.0; 3]);
+    assert_eq!(host(&outputs.light.location), vec![REACH, -REACH, -REACH]);
 }

@@ -146,6 +146,7 @@ pub fn refined_real_trainer(
     let threshold = config.loss.photo_mask;
     let one_colour_light = config.loss.photo_light;
     let light_search = config.loss.photo_light_search;
+    let light_colours = config.loss.photo_light_colours;
     let prior_colour_gain = config.loss.photo_prior_colour;
     let mut trainer = Trainer::new(config, assets, &pca, geometry, view_image, None, device)?;
     if threshold > 0.0 {
@@ -158,7 +159,11 @@ pub fn refined_real_trainer(
     trainer.view.one_colour_light = one_colour_light;
     trainer.view.prior_colour_gain = prior_colour_gain;
     if light_search {
-        trainer.view.light_location = Some(trainer.search_light_location()?.location);
+        let found = trainer.search_light_location()?;
+        trainer.view.light_location = Some(found.location);
+        if light_colours {
+            trainer.view.light_colours = Some([found.ambient, found.diffuse]);
+        }
     }
     Ok((trainer, refinement))
 }
