@@ -329,7 +329,8 @@ pub fn merge(dirs: &[PathBuf]) -> Result<String, BittError> {
     } else {
         "unavailable (no LPIPS weights; never estimated)"
     };
-    let mut md = results_markdown(&summary, note);
+    let alb = existing_plan(out).and_then(|plan| plan["train"]["loss"]["alb"].as_f64());
+    let mut md = results_markdown(&summary, note, alb);
     if let Some(photos) = photos_markdown(&results, &consistency) {
         md.push('\n');
         md.push_str(&photos);

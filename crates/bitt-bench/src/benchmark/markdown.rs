@@ -164,8 +164,19 @@ pub fn photos_markdown(
     Some(md)
 }
 
-/// `results.md`: the tables in the paper's layout and which of its claims hold here.
-pub fn results_markdown(s: &Summary, lpips_note: &str) -> String {
+/// A method's row label. `alb`: the albedo consistency weight BiTT was trained with, when
+/// known (the plan's `train.loss.alb`); at 0, as the photo preset trains
+/// (`TrainConfig::preset_for_photo`), BiTT's row says so instead of naming the loss.
+fn row_label(m: Method, alb: Option<f64>) -> &'static str {
+    match (m, alb) {
+        (Method::Bitt, Some(0.0)) => "BiTT (L_alb weight 0)",
+        _ => m.label(),
+    }
+}
+
+/// `results.md`: the tables in the paper's layout and which of its claims hold here. `alb`:
+/// the albedo consistency weight of the training configuration, when known ([`row_label`]).
+pub fn results_markdown(s: &Summary, lpips_note: &str, alb: Option<f64>) -> String {
     let mut md = String::new();
     md.push_str("# Evaluation results\n\n");
     md.push_str(&format!(
@@ -218,7 +229,7 @@ pub fn results_markdown(s: &Summary, lpips_note: &str) -> String {
             if let Some(x) = per.get(&m) {
                 md.push_str(&format!(
                     "| {} | {} | {} |\n",
-                    m.label(),
+                    row_label(m, alb),
                     row(&x.novel_poses),
                     row(&x.novel_views)
                 ));
@@ -245,7 +256,7 @@ pub fn results_markdown(s: &Summary, lpips_note: &str) -> String {
                         });
                 md.push_str(&format!(
                     "| {} | {l1} | {psnr} | {ssim} | {} | {} | {} | {} | {:.0} |\n",
-                    m.label(),
+                    row_label(m, alb),
                     both(x.texture_gain_fitted.visible, x.texture.visible),
                     both(x.texture_gain_fitted.symmetric, x.texture.symmetric),
                     both(x.texture_gain_fitted.invisible, x.texture.invisible),
@@ -518,7 +529,13 @@ mod tests {
         assert_eq!((p.scenes, p.wins), (2, 1));
         assert!((p.mean_db - 0.5).abs() < 1e-12);
         assert!((p.stderr_db.unwrap() - 1.5).abs() < 1e-12);
-        let md = results_markdown(&s, "test weights");
+        let md = results_markdown(&s, "test weights", Some(0.2));
+        assert!(md.contains("| BiTT (+ L_alb) |"), "{md}");
+        let photo = results_markdown(&s, "test weights", Some(0.0));
+        assert!(
+            photo.contains("| BiTT (L_alb weight 0) |") && !photo.contains("BiTT (+ L_alb)"),
+            "{photo}"
+        );
         assert!(
             md.contains("(per scene: +0.50 ± 1.50 dB, better in 1 of 2)"),
             "{md}"
@@ -541,7 +558,7 @@ mod tests {
                 .iter()
                 .any(|c| c.contains("robust") && c.contains("**holds**"))
         );
-        let md = results_markdown(&s, "unavailable");
+        let md = results_markdown(&s, "unavailable", None);
         assert!(md.contains("## Table 1a"));
         assert!(md.contains("## Table 1b"));
         assert!(md.contains("| 30.0 | 40.0 | 30.0 | 50.0 |"));
