@@ -213,8 +213,8 @@ pub struct LossWeights {
     pub photo_light: bool,
     /// Real photos only: the point light's location is chosen once from the photo's shading
     /// and held there (`bitt_train::light_search`); the colours too with
-    /// `photo_light_colours`. `false` lets the network estimate the location, as the paper does. Not from
-    /// the paper: on the demo photos, lit from every side, the estimated location ended in
+    /// `photo_light_colours`. `false` lets the network estimate the location, as the paper
+    /// does. Not from the paper: on the demo photos, lit from every side, the estimated location ended in
     /// a corner of its box that small changes of the meshes flipped, one corner 2.5 dB worse
     /// at the other photo's pose (issue 34; docs/results/photos.md, The light's location).
     /// A `config.json` written before this option reads `false`, so older runs resume and

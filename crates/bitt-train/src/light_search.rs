@@ -102,25 +102,24 @@ impl Trainer {
         let pixels = fitted_pixels(view)?;
         let photo = to_host(view.image.clone())?;
         let ambient = render(light(1.0, 0.0, [0.0; 3]))?;
-        let mut scored = Vec::new();
-        let mut best: Option<(usize, ShadingFit)> = None;
-        for (i, c) in candidates().into_iter().enumerate() {
+        let mut fits = Vec::new();
+        for c in candidates() {
             let diffuse = render(light(0.0, 1.0, c))?;
-            let fit = fit_shading(&photo, &ambient, &diffuse, &pixels);
-            scored.push((c, fit.residual));
-            if best.as_ref().is_none_or(|(_, b)| fit.residual < b.residual) {
-                best = Some((i, fit));
-            }
+            fits.push((c, fit_shading(&photo, &ambient, &diffuse, &pixels)));
         }
-        let (i, fit) = best.ok_or_else(|| TrainError::Invalid("no light candidate".into()))?;
+        let (location, fit) = fits
+            .iter()
+            .min_by(|a, b| a.1.residual.total_cmp(&b.1.residual))
+            .copied()
+            .ok_or_else(|| TrainError::Invalid("no light candidate".into()))?;
         let [ambient, diffuse] = if view.one_colour_light {
             one_colour(fit.ambient, fit.diffuse)
         } else {
             [fit.ambient, fit.diffuse]
         };
         Ok(LightSearch {
-            location: scored[i].0,
-            candidates: scored,
+            location,
+            candidates: fits.iter().map(|(c, f)| (*c, f.residual)).collect(),
             pixels: pixels.len(),
             ambient,
             diffuse,
@@ -155,12 +154,6 @@ pub struct ShadingFit {
     pub diffuse: [f32; 3],
     /// The residual sum of squares over the photo's sum of squares.
     pub residual: f64,
-}
-
-/// The residual of the best non-negative fit `photo ≈ a · ambient + b · diffuse` per
-/// channel, over the photo's sum of squares ([`fit_shading`]).
-pub fn relative_residual(photo: &[f32], ambient: &[f32], diffuse: &[f32], pixels: &[usize]) -> f64 {
-    fit_shading(photo, ambient, diffuse, pixels).residual
 }
 
 /// The pixels the fit uses: covered by the meshes and trusted.
@@ -268,17 +261,13 @@ mod tests {
         let all = [0, 1, 2, 3];
         let fit = fit_shading(&photo, &ambient, &diffuse, &all);
         assert!(fit.residual < 1e-9);
-        assert_eq!(
-            relative_residual(&photo, &ambient, &diffuse, &all),
-            fit.residual
-        );
         for c in 0..3 {
             assert!((fit.ambient[c] - 0.3).abs() < 1e-5, "{fit:?}");
             assert!((fit.diffuse[c] - 0.5).abs() < 1e-5, "{fit:?}");
         }
         // Another candidate's diffuse image explains it worse.
         let other = [0.4, 0.2, 0.0, 0.1].repeat(3);
-        assert!(relative_residual(&photo, &ambient, &other, &all) > 1e-3);
+        assert!(fit_shading(&photo, &ambient, &other, &all).residual > 1e-3);
     }
 
     #[test]
@@ -288,7 +277,7 @@ mod tests {
         let ambient = [1.0f32; 4].repeat(3);
         let diffuse = [0.0, 0.2, 0.4, 0.6].repeat(3);
         let photo = [0.6, 0.5, 0.4, 0.3].repeat(3);
-        let r = relative_residual(&photo, &ambient, &diffuse, &[0, 1, 2, 3]);
+        let r = fit_shading(&photo, &ambient, &diffuse, &[0, 1, 2, 3]).residual;
         let mean = 0.45f64;
         let rss: f64 = [0.6f64, 0.5, 0.4, 0.3]
             .iter()

@@ -37,8 +37,8 @@ pub struct TrainingView {
     /// paper's three light colours.
     pub one_colour_light: bool,
     /// Where the forward pass holds the point light (camera frame, metres) instead of the
-    /// light network's location ([`TrainingView::light_colours`] holds the colours). `None`: the
-    /// network's location, as the paper does. Real photos set it from
+    /// light network's location ([`TrainingView::light_colours`] holds the colours). `None`:
+    /// the network's location, as the paper does. Real photos set it from
     /// [`Trainer::search_light_location`](crate::trainer::Trainer::search_light_location)
     /// (`loss.photo_light_search`).
     pub light_location: Option<[f32; 3]>,
@@ -325,28 +325,27 @@ pub fn forward(
     let [_, _, h, w] = view.image.dims();
     let device = view.image.device();
     let held = |v: [f32; 3]| Tensor::from_data(TensorData::new(v.to_vec(), [3]), &device);
-    let light = match (view.light_location, view.light_colours) {
-        // Everything held: the light network is not run.
-        (Some(location), Some([ambient, diffuse])) => PointLight {
+    let estimated = || {
+        let light = nets.light.predict(view.image.clone());
+        point_light(&if view.one_colour_light {
+            light.one_colour()
+        } else {
+            light
+        })
+    };
+    let location = view.light_location.map(held);
+    let light = match view.light_colours {
+        // Held colours: the light network runs only for a location nothing holds.
+        Some([ambient, diffuse]) => PointLight {
             ambient: held(ambient),
             diffuse: held(diffuse),
             specular: held([0.0; 3]),
-            location: held(location),
+            location: location.unwrap_or_else(|| estimated().location),
         },
-        (location, colours) => {
-            let estimated = nets.light.predict(view.image.clone());
-            let mut light = point_light(&if view.one_colour_light {
-                estimated.one_colour()
-            } else {
-                estimated
-            });
+        None => {
+            let mut light = estimated();
             if let Some(location) = location {
-                light.location = held(location);
-            }
-            if let Some([ambient, diffuse]) = colours {
-                light.ambient = held(ambient);
-                light.diffuse = held(diffuse);
-                light.specular = held([0.0; 3]);
+                light.location = location;
             }
             light
         }
