@@ -46,7 +46,7 @@ pub struct RefineHandsArgs {
     /// Iterations of the rigid stage (default 40).
     #[arg(long)]
     pub rigid_iterations: Option<usize>,
-    /// Iterations of the full stage (default 160).
+    /// Iterations of the full stage (default 300).
     #[arg(long)]
     pub iterations: Option<usize>,
     /// Backend.
