@@ -303,6 +303,48 @@ pub fn render_geometry(
     Ok(to_host(r.image)?)
 }
 
+/// Which pixels of a render at `geometry` show a texel the training view saw (issue 34's
+/// split of a novel pose): `visible` (per hand, per texel) rendered as a texture, 1 where
+/// seen and 0 elsewhere, under a white ambient light, read above 0.5. `[S * S]`, row-major;
+/// uncovered pixels are not seen. Bilinear sampling blends the border between seen and
+/// unseen texels, so the split falls half way.
+///
+/// # Errors
+/// Masks of the wrong length, or a render that fails.
+pub fn seen_pixels(
+    trainer: &Trainer,
+    geometry: &ViewGeometry,
+    visible: &[Vec<bool>; 2],
+) -> Result<Vec<bool>, EvalError> {
+    let t = trainer.assets.num_texels();
+    if visible.iter().any(|v| v.len() != t) {
+        return Err(EvalError::Invalid(format!(
+            "the visible-texel masks have {} and {} texels; the layout has {t}",
+            visible[0].len(),
+            visible[1].len()
+        )));
+    }
+    let texture = |v: &Vec<bool>| -> Vec<f32> {
+        let one: Vec<f32> = v.iter().map(|&b| if b { 1.0 } else { 0.0 }).collect();
+        [one.as_slice(), &one, &one].concat()
+    };
+    let device = geometry.vertices[0].device();
+    let white = LightValues {
+        ambient: [1.0; 3],
+        diffuse: [0.0; 3],
+        specular: [0.0; 3],
+        location: [0.0; 3],
+    };
+    let image = render_geometry(
+        trainer,
+        geometry,
+        &[texture(&visible[0]), texture(&visible[1])],
+        &white.to_light(&device),
+    )?;
+    let hw = image.len() / 3;
+    Ok(image[..hw].iter().map(|&v| v > 0.5).collect())
+}
+
 /// Means of fine and coarse metrics over several views.
 #[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
 pub struct MeanScore {

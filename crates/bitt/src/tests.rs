@@ -1037,3 +1037,61 @@ fn the_light_search_finds_the_location_that_shaded_the_photo() {
     assert_eq!(host(&outputs.light.specular), vec![0.0; 3]);
     assert_eq!(host(&outputs.light.location), vec![REACH, -REACH, -REACH]);
 }
+
+/// The split of issue 34's photo benchmark: the drawn pixels whose texel the training view
+/// saw. None when no texel was seen; nearly every drawn pixel when all were (the antialiased
+/// rim may fall under half); at the training view itself a part of the drawn pixels, and
+/// none elsewhere: a texel is visible only where all four pixels its sample reads show it,
+/// which on this 32 px view leaves out the wide bands along silhouettes and occlusions.
+#[test]
+fn seen_pixels_are_the_drawn_pixels_of_seen_texels() {
+    use bitt_stdx::to_host;
+    let (config, scene, pca) = tiny();
+    let device = Device::flex().autodiff();
+    let t = synthetic_trainer(&scene, &config, &pca, &device).unwrap();
+    let n = t.assets.num_texels();
+    let drawn: Vec<bool> = to_host(t.view.mask.clone().inner())
+        .unwrap()
+        .iter()
+        .map(|&m| m > 0.5)
+        .collect();
+    let on_drawn = |seen: &[bool]| -> (usize, usize) {
+        let inside = seen.iter().zip(&drawn).filter(|&(&s, &d)| s && d).count();
+        (inside, seen.iter().filter(|&&s| s).count() - inside)
+    };
+    let seen = |visible: &[Vec<bool>; 2]| {
+        crate::evaluate::seen_pixels(&t, &t.view.geometry, visible).unwrap()
+    };
+    let drawn_count = drawn.iter().filter(|&&d| d).count();
+    assert!(drawn_count > 100, "{drawn_count} drawn pixels");
+    assert_eq!(on_drawn(&seen(&[vec![false; n], vec![false; n]])), (0, 0));
+    let (inside, outside) = on_drawn(&seen(&[vec![true; n], vec![true; n]]));
+    assert!(
+        inside as f64 >= 0.9 * drawn_count as f64,
+        "{inside} of {drawn_count}"
+    );
+    assert!(
+        outside as f64 <= 0.05 * drawn_count as f64,
+        "{outside} outside"
+    );
+    let own = t.view.visible.clone().map(|v| {
+        to_host(v.inner())
+            .unwrap()
+            .iter()
+            .map(|&x| x > 0.5)
+            .collect::<Vec<bool>>()
+    });
+    let (own_inside, own_outside) = on_drawn(&seen(&own));
+    assert_eq!(own_outside, 0);
+    assert!(
+        own_inside as f64 >= 0.2 * drawn_count as f64 && own_inside < inside,
+        "{own_inside} of {drawn_count}"
+    );
+    // One hand's texels only: fewer pixels than both.
+    let (left, _) = on_drawn(&seen(&[vec![true; n], vec![false; n]]));
+    assert!(left > 0 && left < inside, "{left} vs {inside}");
+    let e = crate::evaluate::seen_pixels(&t, &t.view.geometry, &[vec![true; 3], vec![true; n]])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("3 and"), "{e}");
+}

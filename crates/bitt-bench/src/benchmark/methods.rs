@@ -184,10 +184,13 @@ fn score(
         if let Some(net) = lpips {
             m.lpips = Some(net.distance(&img, &entry.gt, dims, &device)?);
         }
-        let photo = entry
-            .photo
-            .as_ref()
-            .and_then(|(photo, drawn)| photo_metrics(&img, photo, drawn, size));
+        let photo = match &entry.photo {
+            Some((photo, drawn)) => {
+                let seen = bitt::evaluate::seen_pixels(trainer, &entry.geometry, visible)?;
+                photo_metrics(&img, photo, drawn, Some(&seen), size)
+            }
+            None => None,
+        };
         Ok::<_, BittError>((m, photo, img))
     };
     let (input_view, input_photo, input_img) = one(&truth.input)?;

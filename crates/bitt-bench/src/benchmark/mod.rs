@@ -41,7 +41,7 @@ pub use folder::{
 pub use markdown::{claims, photos_markdown, results_markdown};
 pub use methods::{ContactSheets, SceneSheets, SheetImages, evaluate_real_scene, evaluate_scene};
 pub use photos::{
-    Photo, PhotoConsistency, PhotoMetrics, PhotoNames, PhotoScores, SceneTextures,
+    Photo, PhotoConsistency, PhotoMetrics, PhotoNames, PhotoScores, SceneTextures, SeenSplit,
     mean_photo_metrics, photo_consistency, photo_metrics, photo_scenes, read_scene_textures,
     require_photo_files, scene_textures_path, write_scene_textures,
 };

@@ -70,6 +70,24 @@ pub struct PhotoMetrics {
     /// `None` in results made before it, or where there is too little to correlate.
     #[serde(default)]
     pub detail: Option<f64>,
+    /// The pixels both rendered and hand, split by whether the texel drawn there was seen in
+    /// the training photo ([`bitt::evaluate::seen_pixels`]; issue 34). `None` in results
+    /// made before it.
+    #[serde(default)]
+    pub seen_split: Option<SeenSplit>,
+}
+
+/// [`PhotoMetrics::seen_split`]: where a novel pose shows the training photo's own skin and
+/// where only what the method filled in.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SeenSplit {
+    /// The fraction of the pixels both rendered and hand whose texel the training photo
+    /// showed.
+    pub seen_fraction: f64,
+    /// Scores over those pixels (`None` when there are none).
+    pub seen: Option<ImageMetrics>,
+    /// Scores over the others.
+    pub unseen: Option<ImageMetrics>,
 }
 
 /// A photo scene's scores per method: the input view and the mean over the other photos.
@@ -98,6 +116,11 @@ pub fn mean_photo_metrics(all: &[PhotoMetrics]) -> Option<PhotoMetrics> {
     let mean = |f: &dyn Fn(&PhotoMetrics) -> f64| all.iter().map(f).sum::<f64>() / n;
     let hand: Vec<ImageMetrics> = all.iter().map(|m| m.hand_mask).collect();
     let both: Vec<ImageMetrics> = all.iter().map(|m| m.rendered_and_hand).collect();
+    let splits: Option<Vec<SeenSplit>> = all.iter().map(|m| m.seen_split).collect();
+    // Each part averaged over the photos that have pixels in it.
+    let part = |splits: &[SeenSplit], f: &dyn Fn(&SeenSplit) -> Option<ImageMetrics>| {
+        bitt::evaluate::mean_metrics(&splits.iter().filter_map(f).collect::<Vec<_>>())
+    };
     Some(PhotoMetrics {
         hand_mask: bitt::evaluate::mean_metrics(&hand)?,
         rendered_and_hand: bitt::evaluate::mean_metrics(&both)?,
@@ -108,16 +131,23 @@ pub fn mean_photo_metrics(all: &[PhotoMetrics]) -> Option<PhotoMetrics> {
             .map(|m| m.detail)
             .sum::<Option<f64>>()
             .map(|s| s / n),
+        seen_split: splits.map(|s| SeenSplit {
+            seen_fraction: s.iter().map(|x| x.seen_fraction).sum::<f64>() / n,
+            seen: part(&s, &|x| x.seen),
+            unseen: part(&s, &|x| x.unseen),
+        }),
     })
 }
 
 /// Scores `render` `[3, S, S]` against `photo` `[3, S, S]` in the photo's hand mask, with
-/// `rendered` `[S, S]` the render's silhouette (either hand). `None` when the photo has no
-/// hand pixel or the render covers none of them.
+/// `rendered` `[S, S]` the render's silhouette (either hand) and, when given, `seen` `[S, S]`
+/// the pixels whose texel the training photo showed ([`bitt::evaluate::seen_pixels`]). `None`
+/// when the photo has no hand pixel or the render covers none of them.
 pub fn photo_metrics(
     render: &[f32],
     photo: &[f32],
     rendered: &[f32],
+    seen: Option<&[bool]>,
     size: usize,
 ) -> Option<PhotoMetrics> {
     let hw = size * size;
@@ -135,12 +165,27 @@ pub fn photo_metrics(
     let hand_pixels = hand.iter().filter(|&&m| m >= 0.5).count() as f64;
     let covered = both.iter().filter(|&&m| m >= 0.5).count() as f64;
     let hand_bool: Vec<bool> = hand.iter().map(|&m| m >= 0.5).collect();
+    let seen_split = seen.filter(|s| s.len() == hw).map(|seen| {
+        let part = |want: bool| -> Vec<f32> {
+            both.iter()
+                .zip(seen)
+                .map(|(&b, &s)| if b >= 0.5 && s == want { 1.0 } else { 0.0 })
+                .collect()
+        };
+        let (on, off) = (part(true), part(false));
+        SeenSplit {
+            seen_fraction: on.iter().sum::<f32>() as f64 / covered,
+            seen: masked_image_metrics(render, photo, &on, dims, window),
+            unseen: masked_image_metrics(render, photo, &off, dims, window),
+        }
+    });
     Some(PhotoMetrics {
         hand_mask,
         rendered_and_hand,
         coverage: covered / hand_pixels,
         holes: holes(&drawn, &hand_bool, [size, size]),
         detail: detail_correlation(render, photo, &both, dims),
+        seen_split,
     })
 }
 
@@ -369,7 +414,7 @@ mod tests {
                 }
             })
             .collect();
-        let m = photo_metrics(&render, &photo, &rendered, s).unwrap();
+        let m = photo_metrics(&render, &photo, &rendered, None, s).unwrap();
         assert!((m.coverage - 63.0 / 64.0).abs() < 1e-9, "{}", m.coverage);
         assert!((m.holes - 1.0 / 64.0).abs() < 1e-9, "{}", m.holes);
         assert!(m.rendered_and_hand.psnr.is_infinite());
@@ -381,7 +426,56 @@ mod tests {
         );
         // A flat square has no detail to correlate, and too few pixels anyway.
         assert_eq!(m.detail, None);
-        assert!(photo_metrics(&render, &vec![0.0; 3 * hw], &rendered, s).is_none());
+        assert!(photo_metrics(&render, &vec![0.0; 3 * hw], &rendered, None, s).is_none());
+        assert_eq!(m.seen_split, None);
+    }
+
+    /// The rendered hand pixels split by whether their texel was seen: each part scored on
+    /// its own pixels, and the split averaged over photos.
+    #[test]
+    fn photo_metrics_split_seen_from_unseen_texels() {
+        let s = 16;
+        let hw = s * s;
+        // An 8 x 8 hand, all rendered; the left 2 columns' texels were seen. The render
+        // matches the photo there and is 0.1 too bright elsewhere.
+        let mut photo = vec![0.0f32; 3 * hw];
+        let mut rendered = vec![0.0f32; hw];
+        let mut seen = vec![false; hw];
+        let mut render = vec![0.0f32; 3 * hw];
+        for y in 4..12 {
+            for x in 4..12 {
+                let p = y * s + x;
+                rendered[p] = 1.0;
+                seen[p] = x < 6;
+                for c in 0..3 {
+                    photo[c * hw + p] = 0.5;
+                    render[c * hw + p] = if x < 6 { 0.5 } else { 0.6 };
+                }
+            }
+        }
+        // A seen pixel outside the hand does not count.
+        seen[0] = true;
+        let m = photo_metrics(&render, &photo, &rendered, Some(&seen), s).unwrap();
+        let split = m.seen_split.expect("a seen mask was given");
+        assert!((split.seen_fraction - 0.25).abs() < 1e-9, "{split:?}");
+        let (on, off) = (split.seen.unwrap(), split.unseen.unwrap());
+        assert!(on.psnr.is_infinite() && on.l1 < 1e-9, "{on:?}");
+        assert!((off.l1 - 0.1).abs() < 1e-6, "{off:?}");
+        assert!((off.psnr - 20.0).abs() < 1e-3, "{off:?}");
+        // Nothing seen: the seen part has no pixel.
+        let none = photo_metrics(&render, &photo, &rendered, Some(&vec![false; hw]), s)
+            .unwrap()
+            .seen_split
+            .unwrap();
+        assert_eq!((none.seen_fraction, none.seen), (0.0, None));
+        // The mean over photos averages the fractions, and each part's scores over the photos
+        // that have pixels in it; a photo without a split leaves the mean without one.
+        let all = photo_metrics(&render, &photo, &rendered, Some(&vec![true; hw]), s).unwrap();
+        let mean = mean_photo_metrics(&[m, all]).unwrap().seen_split.unwrap();
+        assert!((mean.seen_fraction - 0.625).abs() < 1e-9, "{mean:?}");
+        assert!((mean.unseen.unwrap().l1 - 0.1).abs() < 1e-6, "{mean:?}");
+        let bare = photo_metrics(&render, &photo, &rendered, None, s).unwrap();
+        assert_eq!(mean_photo_metrics(&[m, bare]).unwrap().seen_split, None);
     }
 
     #[test]
