@@ -412,3 +412,50 @@ pub fn write_mini_interhand(root: &Path) -> PathBuf {
     .unwrap();
     root.to_path_buf()
 }
+
+/// A MANO folder and an HTML folder under `dir` (`mano/`, `html/`), returned in that order:
+/// the procedural hands saved as the project's MANO safetensors without UV layouts, and
+/// HTML's `uvs.pkl` (the procedural right hand's UVs) with an `html.safetensors` texture PCA
+/// at 256² with 12 components (mean 150 / 190 / 230 of 255 per channel).
+pub fn write_mano_html_folders(dir: &Path) -> (PathBuf, PathBuf) {
+    use bitt_texture::{TextureLayout, TexturePca};
+    let (mano, html) = (dir.join("mano"), dir.join("html"));
+    std::fs::create_dir_all(&mano).unwrap();
+    std::fs::create_dir_all(&html).unwrap();
+    let pair = bitt_mesh::procedural_pair();
+    let uv = pair.right.uv.clone().unwrap();
+    for (model, name) in [(&pair.left, "MANO_LEFT"), (&pair.right, "MANO_RIGHT")] {
+        let mut m = model.clone();
+        m.uv = None;
+        bitt_mesh::mano::save_safetensors(&m, &mano.join(format!("{name}.safetensors"))).unwrap();
+    }
+    let uvs = PyValue::dict(vec![
+        (
+            "verts_uvs",
+            PyValue::f64_array(
+                &[uv.uvs.len(), 2],
+                uv.uvs.iter().flat_map(|p| [p.x, p.y]).collect(),
+            ),
+        ),
+        (
+            "faces_uvs",
+            PyValue::NdArrayI64 {
+                shape: vec![uv.faces.len(), 3],
+                data: uv.faces.iter().flatten().map(|&i| i64::from(i)).collect(),
+                fortran: false,
+            },
+        ),
+    ]);
+    std::fs::write(html.join("uvs.pkl"), write_protocol4(&uvs)).unwrap();
+    let layout = TextureLayout::from_uv(&uv, 256, 256, 0).unwrap();
+    let (t, k) = (layout.num_texels(), 12);
+    let mean: Vec<f32> = (0..3 * t).map(|i| 150.0 + 40.0 * (i / t) as f32).collect();
+    let basis: Vec<f32> = (0..3 * t * k)
+        .map(|i| ((i * 7919) % 101) as f32 / 101.0 - 0.5)
+        .collect();
+    TexturePca::new(layout, mean, basis, k, 1.0 / 255.0)
+        .unwrap()
+        .save_safetensors(&html.join("html.safetensors"))
+        .unwrap();
+    (mano, html)
+}

@@ -16,7 +16,8 @@ use bitt_mesh::interhand::{InterHandDataset, InterHandSelection};
 use bitt_mesh::procedural_pair;
 use bitt_nets::Preset;
 use bitt_tests::real_fixture::{
-    AnnotationOptions, MINI_W, scratch, write_annotation, write_image, write_mini_interhand,
+    AnnotationOptions, MINI_W, scratch, write_annotation, write_image, write_mano_html_folders,
+    write_mini_interhand,
 };
 use burn::tensor::Device;
 
@@ -501,47 +502,8 @@ fn demo_frame_trains_with_procedural_hands_if_present() {
 /// 12 coefficients, and the run's avatar reloads its hands from the recorded folders.
 #[test]
 fn mano_and_html_folders_train_with_the_html_prior() {
-    use bitt_tests::pickle_writer::{PyValue, write_protocol4};
-    use bitt_texture::{TextureLayout, TexturePca};
     let dir = scratch("mano-html");
-    let (mano, html) = (dir.join("mano"), dir.join("html"));
-    std::fs::create_dir_all(&mano).unwrap();
-    std::fs::create_dir_all(&html).unwrap();
-    let pair = procedural_pair();
-    let uv = pair.right.uv.clone().unwrap();
-    for (model, name) in [(&pair.left, "MANO_LEFT"), (&pair.right, "MANO_RIGHT")] {
-        let mut m = model.clone();
-        m.uv = None;
-        bitt_mesh::mano::save_safetensors(&m, &mano.join(format!("{name}.safetensors"))).unwrap();
-    }
-    let uvs = PyValue::dict(vec![
-        (
-            "verts_uvs",
-            PyValue::f64_array(
-                &[uv.uvs.len(), 2],
-                uv.uvs.iter().flat_map(|p| [p.x, p.y]).collect(),
-            ),
-        ),
-        (
-            "faces_uvs",
-            PyValue::NdArrayI64 {
-                shape: vec![uv.faces.len(), 3],
-                data: uv.faces.iter().flatten().map(|&i| i64::from(i)).collect(),
-                fortran: false,
-            },
-        ),
-    ]);
-    std::fs::write(html.join("uvs.pkl"), write_protocol4(&uvs)).unwrap();
-    let layout = TextureLayout::from_uv(&uv, 256, 256, 0).unwrap();
-    let (t, k) = (layout.num_texels(), 12);
-    let mean: Vec<f32> = (0..3 * t).map(|i| 150.0 + 40.0 * (i / t) as f32).collect();
-    let basis: Vec<f32> = (0..3 * t * k)
-        .map(|i| ((i * 7919) % 101) as f32 / 101.0 - 0.5)
-        .collect();
-    TexturePca::new(layout, mean, basis, k, 1.0 / 255.0)
-        .unwrap()
-        .save_safetensors(&html.join("html.safetensors"))
-        .unwrap();
+    let (mano, html) = write_mano_html_folders(&dir);
 
     let (img, pkl) = demo_pair(&dir);
     let device = Device::flex().autodiff();

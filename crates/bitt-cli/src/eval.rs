@@ -47,12 +47,12 @@ pub struct EvalArgs {
     /// InterHand2.6M split.
     #[arg(long, default_value = "test")]
     pub split: String,
-    /// InterHand2.6M: folder with MANO_LEFT / MANO_RIGHT (`.pkl` or `.safetensors`); needs
-    /// --html-dir. Default: the procedural hands.
+    /// InterHand2.6M and --photos: folder with MANO_LEFT / MANO_RIGHT (`.pkl` or
+    /// `.safetensors`); needs --html-dir. Default: the procedural hands.
     #[arg(long)]
     pub model_dir: Option<PathBuf>,
-    /// InterHand2.6M: HTML's TextureBasis folder as the texture prior; needs --model-dir.
-    /// Default: the procedural texture PCA.
+    /// InterHand2.6M and --photos: HTML's TextureBasis folder as the texture prior; needs
+    /// --model-dir. Default: the procedural texture PCA.
     #[arg(long, requires = "model_dir")]
     pub html_dir: Option<PathBuf>,
     /// Methods, comma-separated: bitt, bitt-no-alb, bitt-no-sym, html, harp-like,
@@ -193,7 +193,8 @@ mod tests {
     use super::*;
     use bitt_bench::benchmark::SceneResult;
     use bitt_tests::real_fixture::{
-        AnnotationOptions, scratch, write_annotation, write_image, write_mini_interhand,
+        AnnotationOptions, scratch, write_annotation, write_image, write_mano_html_folders,
+        write_mini_interhand,
     };
     use std::path::Path;
 
@@ -285,50 +286,61 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
     }
 
+    /// Two photos `a.jpg` and `b.jpg` of the "same hands" in `dir` (b's turned), as `--photos`
+    /// arguments `IMAGE:ANNOTATION`.
+    fn photo_pair(dir: &Path) -> [String; 2] {
+        ["a", "b"].map(|name| {
+            let (image, annotation) = (
+                dir.join(format!("{name}.jpg")),
+                dir.join(format!("{name}.pkl")),
+            );
+            write_image(&image, 256, 256, None);
+            let turn = if name == "b" { -0.3 } else { 0.0 };
+            write_annotation(
+                &annotation,
+                AnnotationOptions {
+                    turn,
+                    ..AnnotationOptions::default()
+                },
+            );
+            format!("{}:{}", image.display(), annotation.display())
+        })
+    }
+
+    /// `eval --preset tiny --iterations 1 --cache CACHE --out OUT`, then `extra`.
+    fn tiny_eval(cache: &Path, out: &Path, extra: &[&str]) -> EvalArgs {
+        let mut all = vec!["bitt", "--preset", "tiny", "--iterations", "1", "--cache"];
+        all.extend_from_slice(&[s(cache), "--out", s(out)]);
+        all.extend_from_slice(extra);
+        Cli::try_parse_from(all).unwrap().args
+    }
+
     /// `eval --photos`: two photos of the "same hands", each trained on once and scored on
     /// the other, in the photo's own hand mask; the table, a contact sheet per photo, resume,
     /// and refusals (one photo, a missing file) that write nothing.
     #[test]
     fn photo_pairs_are_scored_both_ways_in_the_photos_masks() {
         let dir = scratch("cli-eval-photos");
-        let (a, b) = (dir.join("a.jpg"), dir.join("b.jpg"));
-        let (pa, pb) = (dir.join("a.pkl"), dir.join("b.pkl"));
-        write_image(&a, 256, 256, None);
-        write_image(&b, 256, 256, None);
-        write_annotation(&pa, AnnotationOptions::default());
-        write_annotation(
-            &pb,
-            AnnotationOptions {
-                turn: -0.3,
-                ..AnnotationOptions::default()
-            },
-        );
+        let [ja, jb] = photo_pair(&dir);
         let (out, cache) = (dir.join("eval"), dir.join("cache"));
-        let photo = |i: &Path, p: &Path| format!("{}:{}", i.display(), p.display());
-        let (ja, jb) = (photo(&a, &pa), photo(&b, &pb));
         let parse = |photos: &[&str], out: &Path| {
             let mut all = vec![
-                "bitt",
-                "--preset",
-                "tiny",
-                "--iterations",
-                "1",
                 "--baseline-iterations",
                 "2",
                 "--methods",
                 "bitt,html,harp-like",
-                "--cache",
-                s(&cache),
-                "--out",
-                s(out),
                 "--photos",
             ];
             all.extend_from_slice(photos);
-            Cli::try_parse_from(all).unwrap().args
+            tiny_eval(&cache, out, &all)
         };
         run(&parse(&[&ja, &jb], &out)).unwrap();
         let md = std::fs::read_to_string(out.join("results.md")).unwrap();
         assert!(md.contains("## Real photos"), "{md}");
+        assert!(
+            md.contains("the procedural hands with the procedural texture PCA"),
+            "{md}"
+        );
         for row in [
             "| a -> b | bitt |",
             "| b -> a | harp-like |",
@@ -372,7 +384,11 @@ mod tests {
         );
         // A missing file is named and nothing is written.
         let fresh = dir.join("eval2");
-        let missing = photo(&dir.join("nope.jpg"), &pb);
+        let missing = format!(
+            "{}:{}",
+            dir.join("nope.jpg").display(),
+            jb.split_once(':').unwrap().1
+        );
         let e = format!("{:#}", run(&parse(&[&ja, &missing], &fresh)).unwrap_err());
         assert!(e.contains("nope.jpg"), "{e}");
         assert!(!fresh.exists());
@@ -381,6 +397,71 @@ mod tests {
             Cli::try_parse_from(["bitt", "--photos", ja.as_str()]).is_err(),
             "one photo"
         );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// `eval --photos --model-dir --html-dir`, the command that checks the real-photo
+    /// benchmark with the user's MANO and HTML (here folders of their structure): both
+    /// directions scored, the models named in `results.md` and in the plan, so that a folder
+    /// evaluated with one kind of hands is never resumed with the other; MANO without HTML is
+    /// refused before anything is written.
+    #[test]
+    fn photo_pairs_score_with_mano_and_html_folders() {
+        let dir = scratch("cli-eval-photos-mano");
+        let (mano, html) = write_mano_html_folders(&dir);
+        let [ja, jb] = photo_pair(&dir);
+        let (out, cache) = (dir.join("eval"), dir.join("cache"));
+        let parse = |models: &[&str], out: &Path| {
+            let mut all = vec![
+                "--methods",
+                "bitt,html",
+                "--photos",
+                ja.as_str(),
+                jb.as_str(),
+            ];
+            all.extend_from_slice(models);
+            tiny_eval(&cache, out, &all)
+        };
+        let models = ["--model-dir", s(&mano), "--html-dir", s(&html)];
+        run(&parse(&models, &out)).unwrap();
+        let md = std::fs::read_to_string(out.join("results.md")).unwrap();
+        assert!(
+            md.contains(&format!(
+                "MANO hands (`{}`) with the HTML prior (`{}`)",
+                mano.display(),
+                html.display()
+            )),
+            "{md}"
+        );
+        for row in ["| a -> b | bitt |", "| b -> a | html |"] {
+            assert!(md.contains(row), "{row}: {md}");
+        }
+        let results: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap())
+                .unwrap();
+        for scene in results["scenes"].as_array().unwrap() {
+            let psnr = scene["methods"]["bitt"]["photo"]["novel_poses"]["hand_mask"]["psnr"]
+                .as_f64()
+                .unwrap();
+            assert!(psnr > 3.0, "{psnr}");
+        }
+        // The folder holds MANO's results: resuming it with the procedural hands is refused,
+        // naming what differs, and leaves it as it was.
+        let before = std::fs::read_to_string(out.join("results.json")).unwrap();
+        let e = format!("{:#}", run(&parse(&[], &out)).unwrap_err());
+        assert!(e.contains("models differ"), "{e}");
+        assert_eq!(
+            std::fs::read_to_string(out.join("results.json")).unwrap(),
+            before
+        );
+        // MANO without HTML: refused before the folder exists.
+        let fresh = dir.join("eval2");
+        let e = format!(
+            "{:#}",
+            run(&parse(&["--model-dir", s(&mano)], &fresh)).unwrap_err()
+        );
+        assert!(e.contains("HTML"), "{e}");
+        assert!(!fresh.exists());
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -7,8 +7,8 @@ use bitt_stdx::write_atomically;
 
 use super::photos::photo_consistency;
 use super::{
-    ContactSheets, MeshSetting, Method, SCENE_RESULT_FORMAT, SceneResult, photos_markdown,
-    results_markdown, summarize,
+    ContactSheets, MeshSetting, Method, SCENE_RESULT_FORMAT, SceneResult, models_text,
+    photos_markdown, results_markdown, summarize,
 };
 use bitt::BittError;
 use bitt::baselines::BaselineConfig;
@@ -110,12 +110,20 @@ pub struct EvalPlan<'a> {
     pub scenes: usize,
     /// Where the scenes come from (`synthetic`, `interhand SPLIT ROOT`).
     pub dataset: &'a str,
+    /// The hand models and texture prior of real scenes, when they are the user's MANO and
+    /// HTML folders (`None`: the procedural hands and texture PCA, whose folders' plans have
+    /// no such key).
+    pub models: Option<&'a serde_json::Value>,
 }
 
 /// The keys of an evaluation folder's `config.json`.
 const PLAN_KEYS: [&str; 6] = [
     "train", "baseline", "methods", "settings", "scenes", "dataset",
 ];
+
+/// The keys a plan has only when they apply: `models` (the user's MANO and HTML folders).
+/// A folder evaluated with the procedural models, before the key existed or since, has none.
+const OPTIONAL_PLAN_KEYS: [&str; 1] = ["models"];
 
 /// Creates `out/scenes/` and writes the plan to `out/config.json`. An existing folder must be
 /// an evaluation of the same plan (a rerun resumes it, skipping finished scenes): a folder
@@ -126,7 +134,7 @@ const PLAN_KEYS: [&str; 6] = [
 /// A folder of the user's, an evaluation of another plan (naming what differs), or a write
 /// failure.
 pub fn prepare_folder(out: &Path, plan: &EvalPlan<'_>) -> Result<(), BittError> {
-    let config = serde_json::json!({
+    let mut config = serde_json::json!({
         "train": plan.train,
         "baseline": plan.baseline,
         "methods": plan.methods.iter().map(|m| m.key()).collect::<Vec<_>>(),
@@ -134,6 +142,9 @@ pub fn prepare_folder(out: &Path, plan: &EvalPlan<'_>) -> Result<(), BittError> 
         "scenes": plan.scenes,
         "dataset": plan.dataset,
     });
+    if let Some(models) = plan.models {
+        config["models"] = models.clone();
+    }
     check_eval_folder(out, &config)?;
     // config.json first: shards starting together into one folder see it missing (with at
     // most another shard's temporary of it) or whole, never a folder without it.
@@ -329,8 +340,12 @@ pub fn merge(dirs: &[PathBuf]) -> Result<String, BittError> {
     } else {
         "unavailable (no LPIPS weights; never estimated)"
     };
-    let alb = existing_plan(out).and_then(|plan| plan["train"]["loss"]["alb"].as_f64());
-    let mut md = results_markdown(&summary, note, alb);
+    let plan = existing_plan(out);
+    let alb = plan
+        .as_ref()
+        .and_then(|p| p["train"]["loss"]["alb"].as_f64());
+    let models = models_text(plan.as_ref().and_then(|p| p.get("models")));
+    let mut md = results_markdown(&summary, note, alb, &models);
     if let Some(photos) = photos_markdown(&results, &consistency) {
         md.push('\n');
         md.push_str(&photos);
@@ -355,6 +370,7 @@ fn existing_plan(dir: &Path) -> Option<serde_json::Value> {
 fn plan_differences(a: &serde_json::Value, b: &serde_json::Value) -> Vec<&'static str> {
     PLAN_KEYS
         .iter()
+        .chain(&OPTIONAL_PLAN_KEYS)
         .copied()
         .filter(|k| a[*k] != b[*k])
         .collect()
@@ -450,6 +466,16 @@ mod tests {
         // Another plan: refused, naming what differs.
         let e = check_eval_folder(&ours, &plan(20)).unwrap_err().to_string();
         assert!(e.contains("other settings") && e.contains("train"), "{e}");
+        // The user's MANO and HTML are part of the plan; a plan without them (the procedural
+        // models, also every folder made before the key) is not theirs.
+        let mut mano = plan(10);
+        mano["models"] = serde_json::json!({"hands": {"mano": {"dir": "/m"}}});
+        let e = check_eval_folder(&ours, &mano).unwrap_err().to_string();
+        assert!(e.contains("(models differ"), "{e}");
+        std::fs::write(ours.join("config.json"), mano.to_string()).unwrap();
+        check_eval_folder(&ours, &mano).unwrap();
+        let e = check_eval_folder(&ours, &plan(10)).unwrap_err().to_string();
+        assert!(e.contains("(models differ"), "{e}");
         // A user's folder, even with a config.json of its own: refused, untouched.
         let mine = dir.join("mine");
         std::fs::create_dir_all(&mine).unwrap();

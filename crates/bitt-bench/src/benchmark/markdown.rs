@@ -1,6 +1,7 @@
 //! `results.md`: the tables in the paper's layout and which of the paper's claims hold.
 
 use bitt::metrics::ImageMetrics;
+use bitt::real::{HandSource, PriorSource};
 
 use super::{
     MeanMetrics, MeshSetting, Method, MethodSummary, PhotoConsistency, PhotoMetrics, PhotoScores,
@@ -198,16 +199,36 @@ fn row_label(m: Method, alb: Option<f64>) -> &'static str {
     }
 }
 
+/// The hand models and texture prior an evaluation's plan names (`config.json`'s `models`,
+/// [`super::EvalPlan::models`]), for `results.md`: the procedural ones when it names none.
+pub fn models_text(models: Option<&serde_json::Value>) -> String {
+    let sources = models.and_then(|m| {
+        let hands = serde_json::from_value::<HandSource>(m["hands"].clone()).ok()?;
+        let prior = serde_json::from_value::<PriorSource>(m["prior"].clone()).ok()?;
+        Some((hands, prior))
+    });
+    let hands = match &sources {
+        Some((HandSource::Mano { dir }, _)) => format!("MANO hands (`{}`)", dir.display()),
+        _ => "the procedural hands".to_string(),
+    };
+    let prior = match &sources {
+        Some((_, PriorSource::Html { dir })) => format!("the HTML prior (`{}`)", dir.display()),
+        _ => "the procedural texture PCA".to_string(),
+    };
+    format!("{hands} with {prior}")
+}
+
 /// `results.md`: the tables in the paper's layout and which of its claims hold here. `alb`:
-/// the albedo consistency weight of the training configuration, when known ([`row_label`]).
-pub fn results_markdown(s: &Summary, lpips_note: &str, alb: Option<f64>) -> String {
+/// the albedo consistency weight of the training configuration, when known ([`row_label`]);
+/// `models`: the hands and prior ([`models_text`]).
+pub fn results_markdown(s: &Summary, lpips_note: &str, alb: Option<f64>, models: &str) -> String {
     let mut md = String::new();
     md.push_str("# Evaluation results\n\n");
     md.push_str(&format!(
-        "{} scene(s) (seeds or scene ids {}), preset {}. Every method is trained per scene on the \
-         input view only. LPIPS: {lpips_note}. MS-SSIM needs images larger than 160 px (n/a \
-         at 128 px). Image metrics are on the hand image (ground truth times its hand masks, \
-         black elsewhere), so PSNRs are higher than the paper's.\n\n",
+        "{} scene(s) (seeds or scene ids {}), preset {}, {models}. Every method is trained per \
+         scene on the input view only. LPIPS: {lpips_note}. MS-SSIM needs images larger than \
+         160 px (n/a at 128 px). Image metrics are on the hand image (ground truth times its \
+         hand masks, black elsewhere), so PSNRs are higher than the paper's.\n\n",
         s.seeds.len(),
         s.seeds
             .iter()
@@ -597,9 +618,13 @@ mod tests {
         assert_eq!((p.scenes, p.wins), (2, 1));
         assert!((p.mean_db - 0.5).abs() < 1e-12);
         assert!((p.stderr_db.unwrap() - 1.5).abs() < 1e-12);
-        let md = results_markdown(&s, "test weights", Some(0.2));
+        let md = results_markdown(&s, "test weights", Some(0.2), &models_text(None));
         assert!(md.contains("| BiTT (+ L_alb) |"), "{md}");
-        let photo = results_markdown(&s, "test weights", Some(0.0));
+        assert!(
+            md.contains("the procedural hands with the procedural texture PCA."),
+            "{md}"
+        );
+        let photo = results_markdown(&s, "test weights", Some(0.0), "m");
         assert!(
             photo.contains("| BiTT (L_alb weight 0) |") && !photo.contains("BiTT (+ L_alb)"),
             "{photo}"
@@ -626,7 +651,7 @@ mod tests {
                 .iter()
                 .any(|c| c.contains("robust") && c.contains("**holds**"))
         );
-        let md = results_markdown(&s, "unavailable", None);
+        let md = results_markdown(&s, "unavailable", None, "m");
         assert!(md.contains("## Table 1a"));
         assert!(md.contains("## Table 1b"));
         assert!(md.contains("| 30.0 | 40.0 | 30.0 | 50.0 |"));

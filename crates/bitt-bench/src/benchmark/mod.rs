@@ -38,7 +38,7 @@ pub use folder::{
     EvalPlan, interhand_scene_id, merge, parse_scenes, parse_shard, pending, photo_scene_id,
     prepare_folder, result_path, shard_seeds, trainings_per_scene, write_scene, write_sheet,
 };
-pub use markdown::{claims, photos_markdown, results_markdown};
+pub use markdown::{claims, models_text, photos_markdown, results_markdown};
 pub use methods::{ContactSheets, SceneSheets, SheetImages, evaluate_real_scene, evaluate_scene};
 pub use photos::{
     Photo, PhotoConsistency, PhotoMetrics, PhotoNames, PhotoScores, SceneTextures, SeenSplit,

@@ -26,7 +26,8 @@ use bitt::baselines::BaselineConfig;
 use bitt::config::TrainConfig;
 use bitt::lpips::LpipsVgg;
 use bitt::real::{
-    HandSource, PriorSource, RealScene, interhand_views, load_models, real_trainer, sources,
+    HandSource, PriorSource, RealScene, check_sources, interhand_views, load_models, real_trainer,
+    sources,
 };
 use bitt::texture_model::texture_prior_with_progress;
 use bitt::trainer::Observer;
@@ -433,6 +434,25 @@ pub fn run_evaluation(
                 .join(" ")
         ),
     };
+    // The user's MANO and HTML folders are part of the plan: a folder evaluated with the
+    // procedural models must not be resumed as theirs, nor the other way round.
+    let models = match e.source {
+        EvalSource::InterHand {
+            model_dir,
+            html_dir,
+            ..
+        }
+        | EvalSource::Photos {
+            model_dir,
+            html_dir,
+            ..
+        } if model_dir.is_some() || html_dir.is_some() => {
+            let (hands, prior) = sources(model_dir, html_dir);
+            check_sources(&hands, &prior)?;
+            Some(serde_json::json!({"hands": hands.absolute(), "prior": prior.absolute()}))
+        }
+        _ => None,
+    };
     let plan = EvalPlan {
         train: e.run.config,
         baseline: e.run.baseline,
@@ -440,6 +460,7 @@ pub fn run_evaluation(
         settings: e.run.settings,
         scenes: e.scenes,
         dataset: &dataset,
+        models: models.as_ref(),
     };
     // What can be refused from the options alone is, before the folder is touched.
     match e.source {
